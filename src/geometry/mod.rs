@@ -1,0 +1,201 @@
+//! Rays, triangles and the `obvhs` CWBVH that finds them.
+
+use glam::{Vec3, Vec3A};
+use obvhs::{BvhBuildParams, cwbvh::CwBvh, ray::RayHit, triangle::Triangle};
+use std::time::Duration;
+
+/// A hit: distance along the ray and the index of the triangle (in scene order).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub prim: u32,
+}
+
+/// The scene's triangles in a compressed wide BVH (obvhs' CWBVH, medium build).
+pub struct Accel {
+    bvh: CwBvh,
+    /// Triangles in BVH leaf order (so leaves index them directly).
+    tris: Vec<Triangle>,
+    /// BVH order → scene triangle index.
+    ids: Vec<u32>,
+    /// Scene bounds' diagonal length, for ray offsets.
+    diagonal: f32,
+}
+
+impl Accel {
+    /// Builds the BVH. `triangles` must be non-degenerate and finite (the loader ensures it).
+    pub fn new(triangles: &[[Vec3; 3]]) -> Self {
+        let input: Vec<Triangle> = triangles
+            .iter()
+            .map(|t| Triangle {
+                v0: t[0].into(),
+                v1: t[1].into(),
+                v2: t[2].into(),
+            })
+            .collect();
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for t in triangles {
+            for v in t {
+                lo = lo.min(*v);
+                hi = hi.max(*v);
+            }
+        }
+        let diagonal = if triangles.is_empty() {
+            1.0
+        } else {
+            (hi - lo).length().max(1e-6)
+        };
+        if input.is_empty() {
+            return Self {
+                bvh: CwBvh::default(),
+                tris: Vec::new(),
+                ids: Vec::new(),
+                diagonal,
+            };
+        }
+        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+            &input,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        let ids = bvh.primitive_indices.clone();
+        let tris = ids.iter().map(|&i| input[i as usize]).collect();
+        Self {
+            bvh,
+            tris,
+            ids,
+            diagonal,
+        }
+    }
+
+    pub fn diagonal(&self) -> f32 {
+        self.diagonal
+    }
+
+    /// Closest hit with t in (0, `t_max`).
+    #[inline]
+    pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
+        if self.tris.is_empty() {
+            return None;
+        }
+        let ray = obvhs::ray::Ray::new(Vec3A::from(origin), Vec3A::from(dir), 0.0, t_max);
+        let mut hit = RayHit::none();
+        if self
+            .bvh
+            .ray_traverse(ray, &mut hit, |r, id| self.tris[id].intersect(r))
+        {
+            Some(Hit {
+                t: hit.t,
+                prim: self.ids[hit.primitive_id as usize],
+            })
+        } else {
+            None
+        }
+    }
+
+    /// Whether anything lies between `origin` and `origin + dir·t_max`.
+    #[inline]
+    pub fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
+        if self.tris.is_empty() {
+            return false;
+        }
+        let ray = obvhs::ray::Ray::new(Vec3A::from(origin), Vec3A::from(dir), 0.0, t_max);
+        !self
+            .bvh
+            .ray_traverse_miss(ray, |r, id| self.tris[id].intersect(r))
+    }
+
+    /// Moves `p` off a surface with normal `n` to the side of `dir`, by an amount that grows
+    /// with the magnitude of `p` (f32 spacing) and with the scene's size.
+    #[inline]
+    pub fn offset(&self, p: Vec3, n: Vec3, dir: Vec3) -> Vec3 {
+        let eps = 1e-6 * self.diagonal + 4e-6 * p.abs().max_element();
+        if n.dot(dir) >= 0.0 {
+            p + n * eps
+        } else {
+            p - n * eps
+        }
+    }
+
+    /// Bytes of the BVH: nodes, index map and leaf triangles.
+    pub fn memory_bytes(&self) -> usize {
+        self.bvh.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
+            + self.bvh.primitive_indices.len() * 4
+            + self.tris.len() * std::mem::size_of::<Triangle>()
+            + self.ids.len() * 4
+    }
+}
+
+/// Twice the area and the unit normal of a triangle (normal is zero if degenerate).
+pub fn triangle_normal(t: &[Vec3; 3]) -> (f32, Vec3) {
+    let c = (t[1] - t[0]).cross(t[2] - t[0]);
+    let len = c.length();
+    if len > 0.0 && len.is_finite() {
+        (len, c / len)
+    } else {
+        (0.0, Vec3::ZERO)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad(z: f32, size: f32, offset: Vec3) -> Vec<[Vec3; 3]> {
+        let a = Vec3::new(-size, -size, z) + offset;
+        let b = Vec3::new(size, -size, z) + offset;
+        let c = Vec3::new(size, size, z) + offset;
+        let d = Vec3::new(-size, size, z) + offset;
+        vec![[a, b, c], [a, c, d]]
+    }
+
+    #[test]
+    fn hits_and_misses() {
+        let accel = Accel::new(&quad(5.0, 1.0, Vec3::ZERO));
+        let o = Vec3::new(0.1, 0.3, 0.0);
+        let h = accel.intersect(o, Vec3::Z, f32::INFINITY).unwrap();
+        assert!((h.t - 5.0).abs() < 1e-5);
+        assert!(accel.intersect(o, -Vec3::Z, f32::INFINITY).is_none());
+        assert!(accel.occluded(o, Vec3::Z, 6.0));
+        assert!(!accel.occluded(o, Vec3::Z, 4.0));
+        let empty = Accel::new(&[]);
+        assert!(empty.intersect(Vec3::ZERO, Vec3::Z, 1.0).is_none());
+    }
+
+    #[test]
+    fn spawned_rays_do_not_rehit_their_surface_at_any_scale() {
+        // Mitsuba 3's ray-offset test configurations: (offset, scale).
+        for (off, scale) in [(0.0, 1.0), (1e3, 1.0), (0.0, 1e-3), (1e4, 1e3)] {
+            let o = Vec3::splat(off);
+            let accel = Accel::new(&quad(0.0, scale, o));
+            let mut fails = 0;
+            for i in 0..4096 {
+                let u = (i % 64) as f32 / 64.0 - 0.5;
+                let v = (i / 64) as f32 / 64.0 - 0.5;
+                let p = o + Vec3::new(u * scale, v * scale, 0.0);
+                let dir = Vec3::new(0.3, -0.2, 1.0).normalize();
+                let q = accel.offset(p, Vec3::Z, dir);
+                if let Some(h) = accel.intersect(q, dir, f32::INFINITY) {
+                    if h.t < 1e-3 * scale {
+                        fails += 1;
+                    }
+                }
+                // A receiver just above is not falsely occluded.
+                let q2 = accel.offset(p, Vec3::Z, Vec3::Z);
+                if accel.occluded(q2, Vec3::Z, 0.5 * scale) {
+                    fails += 1;
+                }
+            }
+            assert_eq!(fails, 0, "offset {off} scale {scale}");
+        }
+    }
+
+    #[test]
+    fn degenerate_triangles_have_zero_area() {
+        let t = [Vec3::ZERO, Vec3::X, Vec3::X * 2.0];
+        assert_eq!(triangle_normal(&t).0, 0.0);
+        let t = [Vec3::ZERO, Vec3::ZERO, Vec3::ZERO];
+        assert_eq!(triangle_normal(&t).1, Vec3::ZERO);
+    }
+}

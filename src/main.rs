@@ -1,0 +1,277 @@
+//! The `prismap` command line: parsing and wiring only.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+
+use prismap::photon::Storage;
+use prismap::render::{RenderSession, RenderSettings};
+use prismap::{output, scene};
+
+#[derive(Parser)]
+#[command(
+    name = "prismap",
+    version,
+    about = "Interactive spectral photon mapping"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene headless to PNG or EXR.
+    Render(RenderArgs),
+    /// List the built-in scenes and glasses.
+    List,
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// A .gltf/.glb file, or a built-in scene name (prism, cornell-box, cornell-blackbody).
+    #[arg(default_value = scene::DEFAULT_SCENE)]
+    scene: String,
+    /// Wavelength bins (1–4096; ignored by --storage rgb).
+    #[arg(long, default_value_t = RenderSettings::default().bins)]
+    bins: usize,
+    /// Photon storage: full (N floats), compact (RGB triplet or spike) or rgb (RGB renderer).
+    #[arg(long, default_value = "compact", value_parser = parse_storage)]
+    storage: Storage,
+    /// Photons emitted per pass.
+    #[arg(long, default_value_t = RenderSettings::default().photons_per_pass)]
+    photons: usize,
+    /// Number of passes (default 16 unless --seconds is given).
+    #[arg(long, conflicts_with = "seconds")]
+    passes: Option<u64>,
+    /// Render passes until this many seconds have passed (at least one pass).
+    #[arg(long)]
+    seconds: Option<f64>,
+    /// Image size WxH.
+    #[arg(long, default_value = "256x256", value_parser = parse_size)]
+    size: (u32, u32),
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Final-gather rays per pixel per pass (0: show the global photon map directly).
+    #[arg(long, default_value_t = RenderSettings::default().final_gather_rays)]
+    fg: u32,
+    /// Most single-wavelength photons one photon splits into at dispersive glass.
+    #[arg(long, default_value_t = RenderSettings::default().dispersion_split)]
+    split: usize,
+    /// First-pass gather radius of the global map, in scene units (default: estimated).
+    #[arg(long)]
+    global_radius: Option<f32>,
+    /// First-pass gather radius of the caustic map, in scene units (default: estimated).
+    #[arg(long)]
+    caustic_radius: Option<f32>,
+    /// Exposure multiplier for the PNG (EXR is written linear, unscaled).
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f32,
+    /// Output image: .png (sRGB) or .exr (linear sRGB). Default: SCENE.png.
+    #[arg(short = 'o', long)]
+    output: Option<PathBuf>,
+    /// Write render statistics as JSON here.
+    #[arg(long)]
+    stats: Option<PathBuf>,
+}
+
+fn parse_storage(s: &str) -> Result<Storage, String> {
+    s.parse()
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("size '{s}' must look like 256x256"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("size '{s}': '{v}' is not a positive whole number"))
+    };
+    Ok((p(w)?, p(h)?))
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Some(Command::Render(args)) => render(args),
+        Some(Command::List) => {
+            list();
+            Ok(())
+        }
+        None => {
+            eprintln!(
+                "prismap: rendering the built-in '{}' scene headless (see `prismap --help`).",
+                scene::DEFAULT_SCENE
+            );
+            match Cli::parse_from(["prismap", "render"]).command {
+                Some(Command::Render(args)) => render(args),
+                _ => unreachable!("`prismap render` parses as the render command"),
+            }
+        }
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn list() {
+    println!("built-in scenes:");
+    for (name, _) in scene::BUILTIN {
+        println!("  {name}");
+    }
+    println!("glasses (for extras.prismap.glass):");
+    for g in prismap::spectral::tables::glasses() {
+        println!(
+            "  {:<14} n_d {:.5}  V_d {:.2}",
+            g.name, g.nd_catalog, g.vd_catalog
+        );
+    }
+}
+
+/// Checks that `path` can be written before any work is done.
+fn check_writable(path: &Path, extensions: &[&str]) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !extensions.iter().any(|e| Some(*e) == ext.as_deref()) {
+        bail!(
+            "{}: the file must end in {}",
+            path.display(),
+            extensions
+                .iter()
+                .map(|e| format!(".{e}"))
+                .collect::<Vec<_>>()
+                .join(" or ")
+        );
+    }
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        bail!(
+            "{}: the folder {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    let probe = dir.join(format!(".prismap-write-test-{}", std::process::id()));
+    std::fs::write(&probe, b"").with_context(|| {
+        format!(
+            "{}: the folder {} is not writable",
+            path.display(),
+            dir.display()
+        )
+    })?;
+    let _ = std::fs::remove_file(probe);
+    Ok(())
+}
+
+fn render(args: RenderArgs) -> Result<()> {
+    let start = Instant::now();
+    let scene = scene::load_any(&args.scene)?;
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("{}.png", scene.name)));
+    check_writable(&output, &["png", "exr"])?;
+    if let Some(s) = &args.stats {
+        check_writable(s, &["json"])?;
+    }
+    if !(args.exposure.is_finite() && args.exposure > 0.0) {
+        bail!("--exposure {}: must be finite and > 0", args.exposure);
+    }
+    if let Some(s) = args.seconds {
+        if !(s.is_finite() && s > 0.0) {
+            bail!("--seconds {s}: must be finite and > 0");
+        }
+    }
+    if args.passes == Some(0) {
+        bail!("--passes 0: at least one pass is needed");
+    }
+    let threads = match args.threads {
+        Some(0) => bail!("--threads 0: at least one thread is needed"),
+        Some(t) if t > 1024 => bail!("--threads {t}: at most 1024"),
+        Some(t) => t,
+        None => std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1),
+    };
+    let settings = RenderSettings {
+        bins: args.bins,
+        storage: args.storage,
+        photons_per_pass: args.photons,
+        width: args.size.0,
+        height: args.size.1,
+        seed: args.seed,
+        final_gather_rays: args.fg,
+        dispersion_split: args.split,
+        global_radius: args.global_radius,
+        caustic_radius: args.caustic_radius,
+        ..RenderSettings::default()
+    };
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("cannot start the worker threads")?;
+    let mut session = pool
+        .install(|| RenderSession::new(&scene, settings))
+        .context("invalid settings")?;
+    let passes = args
+        .passes
+        .unwrap_or(if args.seconds.is_some() { u64::MAX } else { 16 });
+    let bar = indicatif::ProgressBar::new(if passes == u64::MAX { 0 } else { passes });
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} pass {pos}/{len} {elapsed} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let render_start = Instant::now();
+    for _ in 0..passes {
+        pool.install(|| session.run_pass())
+            .map_err(|_| anyhow::anyhow!("render cancelled"))?;
+        bar.inc(1);
+        bar.set_message(format!("{:.2} s/pass", session.stats().last_pass_seconds));
+        if let Some(s) = args.seconds {
+            if render_start.elapsed().as_secs_f64() >= s {
+                break;
+            }
+        }
+    }
+    bar.finish_and_clear();
+    let image = session.image();
+    output::write_image(&output, &image, args.exposure)?;
+    let total = start.elapsed().as_secs_f64();
+    let stats = output::stats_json(&session, &image, total);
+    if let Some(path) = &args.stats {
+        output::write_json(path, &stats)?;
+    }
+    let st = session.stats();
+    let mem = session.memory();
+    eprintln!(
+        "{}: {} passes, {} bins {}, {} photons emitted, {} stored (+{} caustic, {} spikes), maps {:.2} MB ({:.1} B/photon), {:.1} s → {}",
+        scene.name,
+        st.passes,
+        session.scene().bins(),
+        session.settings().storage.name(),
+        st.photons_emitted,
+        st.stored_global,
+        st.stored_caustic,
+        st.spike_records,
+        mem.photon_maps as f64 / 1e6,
+        session.bytes_per_photon(),
+        total,
+        output.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,148 @@
+//! Scattering at smooth surfaces: Fresnel reflectance of a dielectric, the refraction
+//! direction, and mirror reflection. (Lambertian reflection is a cosine-weighted
+//! direction and a reflectance; it lives in the tracers.)
+
+use glam::Vec3;
+
+/// Unpolarised Fresnel reflectance for light arriving with `cos_i` = cos θ (≥ 0) from a
+/// medium of index `eta_i` onto one of index `eta_t`. Returns 1 under total internal
+/// reflection; always in [0, 1].
+pub fn fresnel_dielectric(cos_i: f32, eta_i: f32, eta_t: f32) -> f32 {
+    let cos_i = cos_i.clamp(0.0, 1.0);
+    let eta = eta_i / eta_t;
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
+    if sin2_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let rs = (eta_i * cos_i - eta_t * cos_t) / (eta_i * cos_i + eta_t * cos_t);
+    let rp = (eta_t * cos_i - eta_i * cos_t) / (eta_t * cos_i + eta_i * cos_t);
+    let f = 0.5 * (rs * rs + rp * rp);
+    if f.is_finite() {
+        f.clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
+}
+
+/// Mirror reflection of incoming direction `d` about unit normal `n`.
+#[inline]
+pub fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+    d - 2.0 * d.dot(n) * n
+}
+
+/// Refraction of incoming direction `d` (unit) through a surface with unit normal `n`
+/// facing the incoming side (d·n ≤ 0), relative index `eta = eta_i / eta_t`. `None` exactly
+/// when sin²θt ≥ 1 (total internal reflection).
+#[inline]
+pub fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = (-d.dot(n)).clamp(0.0, 1.0);
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
+    if sin2_t >= 1.0 {
+        return None;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let t = eta * d + (eta * cos_i - cos_t) * n;
+    let t = t.normalize_or_zero();
+    if t == Vec3::ZERO { None } else { Some(t) }
+}
+
+/// What a smooth dielectric does to a ray: the side it arrives on decides the indices.
+pub struct DielectricEvent {
+    /// New direction.
+    pub dir: Vec3,
+    /// Whether it was transmitted (refracted).
+    pub transmitted: bool,
+    /// eta_i / eta_t of the crossing (1 for reflection).
+    pub eta_ratio: f32,
+}
+
+/// Chooses reflection with probability F (Fresnel) or refraction, for a glass of index
+/// `eta` with outward geometric normal `n` (air outside). `u` in [0, 1).
+pub fn scatter_dielectric(d: Vec3, n: Vec3, eta: f32, u: f32) -> DielectricEvent {
+    let entering = d.dot(n) < 0.0;
+    let (eta_i, eta_t, nf) = if entering {
+        (1.0, eta, n)
+    } else {
+        (eta, 1.0, -n)
+    };
+    let cos_i = -d.dot(nf);
+    let f = fresnel_dielectric(cos_i, eta_i, eta_t);
+    if u < f {
+        return DielectricEvent {
+            dir: reflect(d, nf),
+            transmitted: false,
+            eta_ratio: 1.0,
+        };
+    }
+    match refract(d, nf, eta_i / eta_t) {
+        Some(t) => DielectricEvent {
+            dir: t,
+            transmitted: true,
+            eta_ratio: eta_i / eta_t,
+        },
+        None => DielectricEvent {
+            dir: reflect(d, nf),
+            transmitted: false,
+            eta_ratio: 1.0,
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fresnel_is_bounded_everywhere_and_one_at_grazing_and_tir() {
+        for &eta_t in &[1.0f32, 1.0 + 1e-7, 1.0 - 1e-7, 1.0 / 1.5, 1.5, 4.0] {
+            let mut c = -1.0f32;
+            while c <= 1.0 {
+                let f = fresnel_dielectric(c, 1.0, eta_t);
+                assert!(
+                    f.is_finite() && (0.0..=1.0).contains(&f),
+                    "cos {c} eta {eta_t}: {f}"
+                );
+                c += 1e-3;
+            }
+            assert!((fresnel_dielectric(0.0, 1.0, eta_t) - 1.0).abs() < 1e-6 || eta_t == 1.0);
+        }
+        // Normal incidence: ((n−1)/(n+1))².
+        assert!((fresnel_dielectric(1.0, 1.0, 1.5) - 0.04).abs() < 1e-6);
+        // Total internal reflection from inside glass beyond the critical angle.
+        let crit = (1.0f32 / 1.5).asin();
+        assert_eq!(fresnel_dielectric((crit + 0.01).cos(), 1.5, 1.0), 1.0);
+        // Index-matched boundary reflects nothing.
+        assert!(fresnel_dielectric(0.3, 1.5, 1.5) < 1e-12);
+    }
+
+    #[test]
+    fn refraction_obeys_snell_and_reports_tir_exactly() {
+        let n = Vec3::Z;
+        for i in 0..=89 {
+            let th = (i as f32).to_radians();
+            let d = Vec3::new(th.sin(), 0.0, -th.cos());
+            let eta = 1.0 / 1.5;
+            let t = refract(d, n, eta).expect("air → glass never reflects totally");
+            let sin_t = t.x;
+            assert!((th.sin() * eta - sin_t).abs() < 1e-5, "{i}°");
+            // Glass → air: TIR exactly when sin²θt ≥ 1.
+            let eta_out = 1.5;
+            let tir = eta_out * eta_out * th.sin() * th.sin() >= 1.0;
+            assert_eq!(refract(d, n, eta_out).is_none(), tir, "{i}°");
+        }
+    }
+
+    #[test]
+    fn scattering_conserves_probability() {
+        // R + T = 1: the fraction of reflections over u matches Fresnel.
+        let n = Vec3::Z;
+        let d = Vec3::new(0.6, 0.0, -0.8);
+        let f = fresnel_dielectric(0.8, 1.0, 1.5);
+        let m = 100_000;
+        let reflected = (0..m)
+            .filter(|k| !scatter_dielectric(d, n, 1.5, (*k as f32 + 0.5) / m as f32).transmitted)
+            .count();
+        assert!((reflected as f32 / m as f32 - f).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,236 @@
+//! An implicit, balanced kd-tree over photon positions: the photons themselves are
+//! reordered so that every subrange `[lo, hi)` has its splitting photon at the middle,
+//! with one byte recording the split axis. Splitting by count (median index), never by
+//! value, keeps the depth at ⌈log₂ n⌉ even for a million coincident photons.
+
+use glam::Vec3;
+
+/// Subranges shorter than this are built on the current thread.
+const PARALLEL_CUTOFF: usize = 1 << 14;
+
+/// Computes the kd order: returns (permutation, axis per position in the new order).
+pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
+    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
+    let mut axes = vec![0u8; positions.len()];
+    build(positions, &mut order, &mut axes);
+    (order, axes)
+}
+
+fn build(pos: &[[f32; 3]], order: &mut [u32], axes: &mut [u8]) {
+    let n = order.len();
+    if n <= 1 {
+        return;
+    }
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for &i in order.iter() {
+        let p = pos[i as usize];
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    let ext = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+    let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
+        0
+    } else if ext[1] >= ext[2] {
+        1
+    } else {
+        2
+    };
+    let mid = n / 2;
+    order.select_nth_unstable_by(mid, |&a, &b| {
+        pos[a as usize][axis]
+            .total_cmp(&pos[b as usize][axis])
+            .then(a.cmp(&b))
+    });
+    axes[mid] = axis as u8;
+    let (left, rest) = order.split_at_mut(mid);
+    let right = &mut rest[1..];
+    let (al, arest) = axes.split_at_mut(mid);
+    let ar = &mut arest[1..];
+    if n > PARALLEL_CUTOFF {
+        rayon::join(|| build(pos, left, al), || build(pos, right, ar));
+    } else {
+        build(pos, left, al);
+        build(pos, right, ar);
+    }
+}
+
+/// Calls `f(index, distance²)` for every position within distance √`r2` of `p`.
+/// `positions` must be in kd order (see [`build_order`]).
+#[inline]
+pub fn for_each_within(
+    positions: &[[f32; 3]],
+    axes: &[u8],
+    p: Vec3,
+    r2: f32,
+    mut f: impl FnMut(usize, f32),
+) {
+    let p = p.to_array();
+    let mut stack = [(0usize, 0usize); 64];
+    let mut sp = 0;
+    let (mut lo, mut hi) = (0usize, positions.len());
+    loop {
+        if lo < hi {
+            let mid = (lo + hi) / 2;
+            let q = positions[mid];
+            let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+            let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            if dist2 <= r2 {
+                f(mid, dist2);
+            }
+            let delta = d[axes[mid] as usize];
+            // Visit the near side now, keep the far side if the sphere crosses the plane.
+            let (near, far) = if delta <= 0.0 {
+                ((lo, mid), (mid + 1, hi))
+            } else {
+                ((mid + 1, hi), (lo, mid))
+            };
+            if delta * delta <= r2 && far.0 < far.1 && sp < stack.len() {
+                stack[sp] = far;
+                sp += 1;
+            }
+            (lo, hi) = near;
+        } else if sp > 0 {
+            sp -= 1;
+            (lo, hi) = stack[sp];
+        } else {
+            break;
+        }
+    }
+}
+
+/// Distance to the k-th nearest position (or to the farthest, if fewer than k).
+pub fn kth_nearest_distance(positions: &[[f32; 3]], axes: &[u8], p: Vec3, k: usize) -> f32 {
+    if positions.is_empty() || k == 0 {
+        return 0.0;
+    }
+    // One exact traversal with a bounded max-heap of the k smallest distances.
+    let mut heap: std::collections::BinaryHeap<OrdF32> = std::collections::BinaryHeap::new();
+    let mut r2 = f32::INFINITY;
+    kth_rec(
+        positions,
+        axes,
+        p.to_array(),
+        k,
+        0,
+        positions.len(),
+        &mut heap,
+        &mut r2,
+    );
+    heap.peek().map(|d| d.0.sqrt()).unwrap_or(0.0)
+}
+
+#[derive(PartialEq, PartialOrd)]
+struct OrdF32(f32);
+impl Eq for OrdF32 {}
+impl Ord for OrdF32 {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&o.0)
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn kth_rec(
+    pos: &[[f32; 3]],
+    axes: &[u8],
+    p: [f32; 3],
+    k: usize,
+    lo: usize,
+    hi: usize,
+    heap: &mut std::collections::BinaryHeap<OrdF32>,
+    r2: &mut f32,
+) {
+    if lo >= hi {
+        return;
+    }
+    let mid = (lo + hi) / 2;
+    let q = pos[mid];
+    let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    if heap.len() < k {
+        heap.push(OrdF32(dist2));
+        if heap.len() == k {
+            *r2 = heap.peek().map(|v| v.0).unwrap_or(f32::INFINITY);
+        }
+    } else if dist2 < *r2 {
+        heap.pop();
+        heap.push(OrdF32(dist2));
+        *r2 = heap.peek().map(|v| v.0).unwrap_or(f32::INFINITY);
+    }
+    let delta = d[axes[mid] as usize];
+    let (near, far) = if delta <= 0.0 {
+        ((lo, mid), (mid + 1, hi))
+    } else {
+        ((mid + 1, hi), (lo, mid))
+    };
+    kth_rec(pos, axes, p, k, near.0, near.1, heap, r2);
+    if delta * delta <= *r2 {
+        kth_rec(pos, axes, p, k, far.0, far.1, heap, r2);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::{Purpose, Rng};
+
+    fn ordered(points: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<u8>) {
+        let (order, axes) = build_order(points);
+        (order.iter().map(|&i| points[i as usize]).collect(), axes)
+    }
+
+    fn brute(points: &[[f32; 3]], p: Vec3, r2: f32) -> usize {
+        points
+            .iter()
+            .filter(|q| (Vec3::from_array(**q) - p).length_squared() <= r2)
+            .count()
+    }
+
+    #[test]
+    fn range_queries_match_brute_force() {
+        let mut rng = Rng::stream(5, 0, 0, Purpose::Photon);
+        let pts: Vec<[f32; 3]> = (0..20_000)
+            .map(|_| [rng.next_f32(), rng.next_f32() * 0.1, rng.next_f32()])
+            .collect();
+        let (sorted, axes) = ordered(&pts);
+        for _ in 0..200 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32() * 0.1, rng.next_f32());
+            let r2 = 0.003;
+            let mut n = 0;
+            for_each_within(&sorted, &axes, p, r2, |_, _| n += 1);
+            assert_eq!(n, brute(&pts, p, r2));
+        }
+    }
+
+    #[test]
+    fn empty_single_and_million_coincident_photons() {
+        let (s, a) = ordered(&[]);
+        let mut n = 0;
+        for_each_within(&s, &a, Vec3::ZERO, 1.0, |_, _| n += 1);
+        assert_eq!(n, 0);
+        assert_eq!(kth_nearest_distance(&s, &a, Vec3::ZERO, 5), 0.0);
+
+        let (s, a) = ordered(&[[1.0, 2.0, 3.0]]);
+        for_each_within(&s, &a, Vec3::new(1.0, 2.0, 3.0), 0.0, |_, _| n += 1);
+        assert_eq!(n, 1);
+
+        // kiddo#475 / CGAL#3077: many identical points broke other trees.
+        let same = vec![[0.5f32, 0.5, 0.5]; 1_000_000];
+        let (s, a) = ordered(&same);
+        let mut n = 0;
+        for_each_within(&s, &a, Vec3::splat(0.5), 1e-12, |_, _| n += 1);
+        assert_eq!(n, 1_000_000);
+        // A line and a plane of points.
+        let line: Vec<[f32; 3]> = (0..100_000).map(|i| [i as f32, 0.0, 0.0]).collect();
+        let (s, a) = ordered(&line);
+        let mut n = 0;
+        for_each_within(&s, &a, Vec3::new(500.0, 0.0, 0.0), 10.5 * 10.5, |_, _| {
+            n += 1
+        });
+        assert_eq!(n, 21);
+        let d = kth_nearest_distance(&s, &a, Vec3::new(500.0, 0.0, 0.0), 3);
+        assert!((d - 1.0).abs() < 1e-6, "{d}");
+    }
+}

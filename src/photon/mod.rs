@@ -1,0 +1,11 @@
+//! The photon pass and photon maps: tracing with full N-bin flux, splitting at
+//! dispersive glass, storage in full / compact / RGB records, and kd-tree search.
+
+pub mod kdtree;
+pub mod map;
+pub mod record;
+pub mod trace;
+
+pub use map::{PhotonBatch, PhotonMap};
+pub use record::Storage;
+pub use trace::{PhotonPass, PhotonSettings, split_dispersive, trace_photons};

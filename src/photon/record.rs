@@ -1,0 +1,193 @@
+//! Byte layouts of stored photons.
+//!
+//! Every stored photon is a 16-byte [`PhotonHeader`] plus its flux, kept in two parallel
+//! arrays (structure of arrays), plus one byte of kd-tree split axis:
+//!
+//! | storage   | header                         | flux                              | kd axis | bytes/photon |
+//! |-----------|--------------------------------|-----------------------------------|---------|--------------|
+//! | `full`    | position 3×f32, direction u32  | N × f32                           | u8      | 17 + 4N      |
+//! | `compact` | position 3×f32, direction u32  | 3 × f32: RGB triplet or spike     | u8      | 29           |
+//! | `rgb`     | position 3×f32, direction u32  | 3 × f32: linear sRGB              | u8      | 29           |
+//!
+//! The direction is the photon's travel direction, octahedral-encoded in 2×16 bits
+//! (error < 0.01°), used only to reject photons that arrived from the other side of a
+//! surface. A compact **spike** record is `(-1.0, bin as f32, amplitude)`: lossless, since
+//! a valid RGB triplet is never negative and an f32 holds every bin index exactly.
+
+use glam::Vec3;
+
+/// Which flux format a photon map keeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Storage {
+    /// N floats per photon.
+    Full,
+    /// Lai & Christensen's Algorithm 1: RGB triplet, or a lossless single-bin spike.
+    Compact,
+    /// The RGB renderer baseline: transport and storage in linear sRGB.
+    Rgb,
+}
+
+impl Storage {
+    pub fn name(self) -> &'static str {
+        match self {
+            Storage::Full => "full",
+            Storage::Compact => "compact",
+            Storage::Rgb => "rgb",
+        }
+    }
+
+    pub const ALL: [Storage; 3] = [Storage::Full, Storage::Compact, Storage::Rgb];
+
+    /// f32 flux values per photon for a grid of `bins` channels.
+    pub fn flux_stride(self, bins: usize) -> usize {
+        match self {
+            Storage::Full => bins,
+            Storage::Compact | Storage::Rgb => 3,
+        }
+    }
+
+    /// Exact bytes per stored photon (header + flux + kd axis byte).
+    pub fn bytes_per_photon(self, bins: usize) -> usize {
+        size_of::<PhotonHeader>() + 4 * self.flux_stride(bins) + 1
+    }
+}
+
+impl std::str::FromStr for Storage {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "full" => Ok(Storage::Full),
+            "compact" => Ok(Storage::Compact),
+            "rgb" => Ok(Storage::Rgb),
+            _ => Err(format!("unknown storage '{s}' (use full, compact or rgb)")),
+        }
+    }
+}
+
+/// Position and direction of a stored photon: 16 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhotonHeader {
+    pub pos: [f32; 3],
+    pub dir: u32,
+}
+
+const _: () = assert!(size_of::<PhotonHeader>() == 16);
+
+impl PhotonHeader {
+    pub fn new(pos: Vec3, dir: Vec3) -> Self {
+        Self {
+            pos: pos.to_array(),
+            dir: oct_encode(dir),
+        }
+    }
+
+    #[inline]
+    pub fn position(&self) -> Vec3 {
+        Vec3::from_array(self.pos)
+    }
+
+    #[inline]
+    pub fn direction(&self) -> Vec3 {
+        oct_decode(self.dir)
+    }
+}
+
+/// The marker in the first float of a spike record.
+pub const SPIKE_MARKER: f32 = -1.0;
+
+/// A compact spike record for `amplitude` in `bin`.
+#[inline]
+pub fn encode_spike(bin: usize, amplitude: f32) -> [f32; 3] {
+    [SPIKE_MARKER, bin as f32, amplitude]
+}
+
+/// `(bin, amplitude)` if the compact record is a spike.
+#[inline]
+pub fn decode_spike(rec: [f32; 3]) -> Option<(usize, f32)> {
+    (rec[0] < 0.0).then_some((rec[1] as usize, rec[2]))
+}
+
+/// Octahedral encoding of a unit vector in 2×16 bits.
+pub fn oct_encode(d: Vec3) -> u32 {
+    let d = d.normalize_or_zero();
+    let l1 = d.x.abs() + d.y.abs() + d.z.abs();
+    if l1 == 0.0 {
+        return 0;
+    }
+    let (mut u, mut v) = (d.x / l1, d.y / l1);
+    if d.z < 0.0 {
+        let (pu, pv) = (u, v);
+        u = (1.0 - pv.abs()) * pu.signum();
+        v = (1.0 - pu.abs()) * pv.signum();
+    }
+    let q = |x: f32| (((x.clamp(-1.0, 1.0) * 0.5 + 0.5) * 65535.0).round() as u32) & 0xFFFF;
+    q(u) | (q(v) << 16)
+}
+
+pub fn oct_decode(e: u32) -> Vec3 {
+    let u = (e & 0xFFFF) as f32 / 65535.0 * 2.0 - 1.0;
+    let v = (e >> 16) as f32 / 65535.0 * 2.0 - 1.0;
+    let z = 1.0 - u.abs() - v.abs();
+    let (x, y) = if z < 0.0 {
+        ((1.0 - v.abs()) * u.signum(), (1.0 - u.abs()) * v.signum())
+    } else {
+        (u, v)
+    };
+    Vec3::new(x, y, z).normalize_or_zero()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::{Purpose, Rng, uniform_sphere};
+
+    #[test]
+    fn spike_round_trip_is_exact_for_every_bin_and_amplitude() {
+        for n in [1usize, 2, 4, 100, 1000] {
+            for bin in 0..n {
+                for amp in [
+                    f32::from_bits(1), // smallest denormal
+                    f32::MIN_POSITIVE,
+                    1e-20,
+                    0.37,
+                    1.0,
+                    12345.678,
+                    1e30,
+                ] {
+                    let rec = encode_spike(bin, amp);
+                    assert_eq!(decode_spike(rec), Some((bin, amp)));
+                }
+            }
+        }
+        // A valid RGB triplet is never mistaken for a spike.
+        assert_eq!(decode_spike([0.0, 5.0, 1.0]), None);
+    }
+
+    #[test]
+    fn storage_sizes_are_as_documented() {
+        assert_eq!(Storage::Compact.bytes_per_photon(4), 29);
+        assert_eq!(Storage::Compact.bytes_per_photon(1000), 29);
+        assert_eq!(Storage::Rgb.bytes_per_photon(100), 29);
+        assert_eq!(Storage::Full.bytes_per_photon(4), 33);
+        assert_eq!(Storage::Full.bytes_per_photon(100), 417);
+    }
+
+    #[test]
+    fn octahedral_directions_are_accurate() {
+        let mut rng = Rng::stream(0, 0, 0, Purpose::Photon);
+        for _ in 0..10_000 {
+            let d = uniform_sphere(rng.next_2d());
+            let back = oct_decode(oct_encode(d));
+            // Angle from |d × back| (a dot product near 1 has no f32 resolution left).
+            assert!(
+                d.cross(back).length() < 0.01f32.to_radians().sin(),
+                "{d} {back}"
+            );
+        }
+        for d in [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z] {
+            assert!(d.dot(oct_decode(oct_encode(d))) > 0.9999);
+        }
+    }
+}

@@ -1,0 +1,386 @@
+//! The photon pass: photons leave the lights carrying all N bins, bounce with Russian
+//! roulette, are stored at diffuse hits (global map; caustic map for L S+ D paths) and
+//! split into single-bin photons at dispersive glass.
+//!
+//! **Splitting** (documented choice): a photon with k > 1 non-zero bins reaching a
+//! dispersive surface becomes `min(k, S)` single-bin photons (S = `dispersion_split`).
+//! If k ≤ S each non-zero bin becomes its own photon with exactly its flux. Otherwise S
+//! bins are drawn by stratified sampling of the flux CDF (strata (s + ξ)/S) and each
+//! carries Σflux / S in its bin. Either way the split photons' flux sums exactly to the
+//! original, and every bin's expected flux is unchanged (unbiased): the stratum s picks
+//! bin j with probability S·|I_j ∩ stratum|, so E[flux_j] = Σ/S · S · flux_j/Σ = flux_j.
+//! Split photons carry comparable power (Σ/S), as the paper recommends.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::map::{PhotonBatch, PhotonMap};
+use super::record::Storage;
+use crate::materials::{reflect, scatter_dielectric};
+use crate::sampling::{
+    Purpose, Rng, cosine_hemisphere, sample_cdf, uniform_cone, uniform_sphere, uniform_triangle,
+};
+use crate::scene::{LightKind, SpectralScene, SurfaceKind};
+use crate::spectral::spd;
+
+/// Photons traced per work item (fixed, so results do not depend on the thread count).
+const CHUNK: usize = 1024;
+
+#[derive(Clone, Debug)]
+pub struct PhotonSettings {
+    pub photons: usize,
+    pub storage: Storage,
+    pub max_depth: u32,
+    pub dispersion_split: usize,
+    /// Build a caustic map (only meaningful when the scene has specular surfaces).
+    pub caustic_map: bool,
+}
+
+/// What one photon pass produced.
+pub struct PhotonPass {
+    pub global: PhotonMap,
+    pub caustic: Option<PhotonMap>,
+    pub emitted: u64,
+    pub splits: u64,
+}
+
+/// Cancelled by the caller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cancelled;
+
+struct Path {
+    origin: Vec3,
+    dir: Vec3,
+    flux: Vec<f32>,
+    depth: u32,
+    diffuse_seen: bool,
+    specular_seen: bool,
+}
+
+/// glTF's spot falloff: smooth (squared linear ramp) between the cone angles, a hard
+/// edge when they coincide. (The glTF sample code clamps the ramp width to 0.001, which
+/// would dim a 1° spotlight a thousandfold.)
+#[inline]
+pub fn spot_falloff(cos: f32, cos_outer: f32, cos_inner: f32) -> f32 {
+    let width = cos_inner - cos_outer;
+    if width <= 0.0 {
+        return if cos >= cos_outer { 1.0 } else { 0.0 };
+    }
+    let t = ((cos - cos_outer) / width).clamp(0.0, 1.0);
+    t * t
+}
+
+/// Traces `settings.photons` photons for pass `pass`.
+pub fn trace_photons(
+    scene: &SpectralScene,
+    settings: &PhotonSettings,
+    seed: u64,
+    pass: u64,
+    cancel: &AtomicBool,
+) -> Result<PhotonPass, Cancelled> {
+    let n = scene.bins();
+    let chunks = settings.photons.div_ceil(CHUNK);
+    let caustic = settings.caustic_map && scene.has_specular;
+    let results: Vec<Option<(PhotonBatch, PhotonBatch, u64)>> = (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            if cancel.load(Ordering::Relaxed) {
+                return None;
+            }
+            let mut global = PhotonBatch::new(settings.storage, n);
+            let mut caustics = PhotonBatch::new(settings.storage, n);
+            let mut splits = 0;
+            let start = c * CHUNK;
+            let end = (start + CHUNK).min(settings.photons);
+            for i in start..end {
+                let mut rng = Rng::stream(seed, pass, i as u64, Purpose::Photon);
+                splits += trace_one(
+                    scene,
+                    settings,
+                    caustic,
+                    &mut rng,
+                    &mut global,
+                    &mut caustics,
+                );
+            }
+            Some((global, caustics, splits))
+        })
+        .collect();
+    let mut global = PhotonBatch::new(settings.storage, n);
+    let mut caustics = PhotonBatch::new(settings.storage, n);
+    let mut splits = 0;
+    for r in results {
+        let (g, c, s) = r.ok_or(Cancelled)?;
+        global.append(g);
+        caustics.append(c);
+        splits += s;
+    }
+    if cancel.load(Ordering::Relaxed) {
+        return Err(Cancelled);
+    }
+    let (global, caustic_map) = rayon::join(
+        || PhotonMap::build(global),
+        || caustic.then(|| PhotonMap::build(caustics)),
+    );
+    Ok(PhotonPass {
+        global,
+        caustic: caustic_map,
+        emitted: settings.photons as u64,
+        splits,
+    })
+}
+
+/// Emits and traces one photon; returns the number of dispersive splits.
+fn trace_one(
+    scene: &SpectralScene,
+    settings: &PhotonSettings,
+    caustic: bool,
+    rng: &mut Rng,
+    global: &mut PhotonBatch,
+    caustics: &mut PhotonBatch,
+) -> u64 {
+    let Some(first) = emit(scene, settings.photons, rng) else {
+        return 0;
+    };
+    let grid = &scene.grid;
+    let mut splits = 0;
+    let mut stack = vec![first];
+    while let Some(mut path) = stack.pop() {
+        while path.depth < settings.max_depth {
+            let Some(hit) = scene.accel.intersect(path.origin, path.dir, f32::INFINITY) else {
+                break;
+            };
+            let tri = &scene.tris[hit.prim as usize];
+            let mat = &scene.materials[tri.material as usize];
+            let p = path.origin + path.dir * hit.t;
+            let n = tri.normal;
+            let nf = if path.dir.dot(n) < 0.0 { n } else { -n };
+            path.depth += 1;
+            match &mat.kind {
+                SurfaceKind::Diffuse { reflectance } => {
+                    global.push(grid, p, path.dir, &path.flux);
+                    if caustic && path.specular_seen && !path.diffuse_seen {
+                        caustics.push(grid, p, path.dir, &path.flux);
+                    }
+                    if !roulette(&mut path.flux, reflectance, rng) {
+                        break;
+                    }
+                    path.diffuse_seen = true;
+                    path.dir = cosine_hemisphere(nf, rng.next_2d());
+                    path.origin = scene.accel.offset(p, nf, path.dir);
+                }
+                SurfaceKind::Mirror { reflectance } => {
+                    if !roulette(&mut path.flux, reflectance, rng) {
+                        break;
+                    }
+                    path.specular_seen = true;
+                    path.dir = reflect(path.dir, nf);
+                    path.origin = scene.accel.offset(p, nf, path.dir);
+                }
+                SurfaceKind::Dielectric { eta, dispersive } => {
+                    let single = spd::single_nonzero(&path.flux);
+                    if *dispersive && single.is_none() {
+                        // Split here; the pieces continue from this same hit.
+                        splits += 1;
+                        path.depth -= 1;
+                        for flux in split_dispersive(&path.flux, settings.dispersion_split, rng) {
+                            stack.push(Path {
+                                origin: path.origin,
+                                dir: path.dir,
+                                flux,
+                                depth: path.depth,
+                                diffuse_seen: path.diffuse_seen,
+                                specular_seen: path.specular_seen,
+                            });
+                        }
+                        break;
+                    }
+                    let e = eta[single.unwrap_or(0)];
+                    let ev = scatter_dielectric(path.dir, n, e, rng.next_f32());
+                    path.specular_seen = true;
+                    path.dir = ev.dir;
+                    path.origin = scene.accel.offset(p, n, path.dir);
+                }
+            }
+        }
+    }
+    splits
+}
+
+/// Russian roulette on reflectance: survive with p = min(1, Σ(flux·ρ)/Σflux) and scale
+/// the flux by ρ/p, which keeps the photon's power nearly constant and the estimate
+/// unbiased. Returns false when the photon is absorbed.
+fn roulette(flux: &mut [f32], reflectance: &[f32], rng: &mut Rng) -> bool {
+    let before = spd::sum(flux);
+    spd::mul_assign(flux, reflectance);
+    let after = spd::sum(flux);
+    if !(before > 0.0 && after > 0.0) {
+        return false;
+    }
+    let p = (after / before).min(1.0);
+    if rng.next_f32() >= p {
+        return false;
+    }
+    spd::scale(flux, 1.0 / p);
+    true
+}
+
+/// Splits a multi-bin flux into single-bin fluxes (see the module docs).
+pub fn split_dispersive(flux: &[f32], max_split: usize, rng: &mut Rng) -> Vec<Vec<f32>> {
+    let n = flux.len();
+    let nonzero: Vec<usize> = (0..n).filter(|&i| flux[i] > 0.0).collect();
+    let s = max_split.max(1);
+    if nonzero.len() <= s {
+        return nonzero
+            .into_iter()
+            .map(|i| {
+                let mut f = vec![0.0; n];
+                f[i] = flux[i];
+                f
+            })
+            .collect();
+    }
+    let total: f64 = flux.iter().map(|&v| v.max(0.0) as f64).sum();
+    let mut cdf = Vec::with_capacity(n);
+    let mut acc = 0.0f64;
+    for &v in flux {
+        acc += v.max(0.0) as f64;
+        cdf.push(acc);
+    }
+    let xi = rng.next_f32() as f64;
+    let share = (total / s as f64) as f32;
+    (0..s)
+        .map(|k| {
+            let target = (k as f64 + xi) / s as f64 * total;
+            let bin = cdf.partition_point(|&c| c <= target).min(n - 1);
+            let mut f = vec![0.0; n];
+            f[bin] = share;
+            f
+        })
+        .collect()
+}
+
+/// Chooses a light and emits a photon from it (flux already divided by the photon count
+/// and the light's selection probability).
+fn emit(scene: &SpectralScene, photons: usize, rng: &mut Rng) -> Option<Path> {
+    if scene.lights.is_empty() {
+        return None;
+    }
+    let li = sample_cdf(&scene.emit_cdf, rng.next_f32());
+    let light = &scene.lights[li];
+    let pmf = scene.emit_pmf[li];
+    if !(pmf > 0.0) {
+        return None;
+    }
+    let norm = 1.0 / (pmf * photons as f32);
+    let (origin, dir, weight) = match light.kind {
+        LightKind::Area { tri } => {
+            let t = &scene.tris[tri as usize];
+            let (b1, b2) = uniform_triangle(rng.next_2d());
+            let p = t.v0 + t.e1 * b1 + t.e2 * b2;
+            let dir = cosine_hemisphere(t.normal, rng.next_2d());
+            (
+                scene.accel.offset(p, t.normal, dir),
+                dir,
+                std::f32::consts::PI * t.area,
+            )
+        }
+        LightKind::Point { position } => (
+            position,
+            uniform_sphere(rng.next_2d()),
+            4.0 * std::f32::consts::PI,
+        ),
+        LightKind::Spot {
+            position,
+            axis,
+            cos_outer,
+            cos_inner,
+        } => {
+            let dir = uniform_cone(axis, cos_outer, rng.next_2d());
+            let solid_angle = 2.0 * std::f32::consts::PI * (1.0 - cos_outer);
+            (
+                position,
+                dir,
+                solid_angle * spot_falloff(dir.dot(axis), cos_outer, cos_inner),
+            )
+        }
+    };
+    let mut flux = light.spectrum.clone();
+    spd::scale(&mut flux, weight * norm);
+    Some(Path {
+        origin,
+        dir,
+        flux,
+        depth: 0,
+        diffuse_seen: false,
+        specular_seen: false,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn splitting_conserves_flux_for_every_bin_count() {
+        let mut rng = Rng::stream(9, 0, 0, Purpose::Photon);
+        for n in [1usize, 2, 4, 100, 1000] {
+            let flux: Vec<f32> = (0..n).map(|i| 1.0 + (i % 7) as f32).collect();
+            let total: f64 = flux.iter().map(|&v| v as f64).sum();
+            for s in [1usize, 4, 16, 2000] {
+                let parts = split_dispersive(&flux, s, &mut rng);
+                assert_eq!(parts.len(), n.min(s));
+                let sum: f64 = parts.iter().flatten().map(|&v| v as f64).sum();
+                assert!(
+                    (sum - total).abs() <= 1e-5 * total,
+                    "n={n} s={s}: {sum} vs {total}"
+                );
+                for p in &parts {
+                    assert!(spd::single_nonzero(p).is_some(), "each piece is one bin");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn stratified_splitting_is_unbiased_per_bin() {
+        let n = 10;
+        let flux: Vec<f32> = (0..n).map(|i| (i as f32 + 1.0).powi(2)).collect();
+        let mut mean = vec![0.0f64; n];
+        let trials = 20_000;
+        for t in 0..trials {
+            let mut rng = Rng::stream(1, 0, t, Purpose::Photon);
+            for p in split_dispersive(&flux, 3, &mut rng) {
+                for (m, v) in mean.iter_mut().zip(&p) {
+                    *m += *v as f64 / trials as f64;
+                }
+            }
+        }
+        // Each bin's per-trial value is Σ/S with probability p = S·f/Σ (else 0): allow 4σ.
+        let total: f64 = flux.iter().map(|&v| v as f64).sum();
+        let share = total / 3.0;
+        for (m, f) in mean.iter().zip(&flux) {
+            let p = (3.0 * *f as f64 / total).min(1.0);
+            let sigma = share * (p * (1.0 - p) / trials as f64).sqrt();
+            assert!(
+                (m - *f as f64).abs() < 4.0 * sigma + 1e-9,
+                "{m} vs {f} (σ {sigma})"
+            );
+        }
+    }
+
+    #[test]
+    fn spot_falloff_is_bounded() {
+        let (co, ci) = (0.9f32, 0.95f32);
+        assert_eq!(spot_falloff(1.0, co, ci), 1.0);
+        assert_eq!(spot_falloff(0.8, co, ci), 0.0);
+        assert!((spot_falloff(0.925, co, ci) - 0.25).abs() < 1e-4);
+        assert_eq!(spot_falloff(0.5, 0.5, 0.5), 1.0);
+        assert_eq!(spot_falloff(0.4, 0.5, 0.5), 0.0);
+        // A half-degree spotlight keeps its full intensity on its axis.
+        let (co, ci) = (0.5f32.to_radians().cos(), 0.4f32.to_radians().cos());
+        assert_eq!(spot_falloff(1.0, co, ci), 1.0);
+    }
+}

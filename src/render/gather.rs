@@ -1,0 +1,342 @@
+//! The gather pass: camera rays through specular chains to the first diffuse hit, where
+//! radiance = direct light (light sampling) + caustics (caustic map) + indirect light
+//! (final gathering over the global map, as in Jensen's photon mapping). With zero final
+//! gather rays the global map is shown directly (all light from one density estimate).
+
+use glam::Vec3;
+
+use crate::materials::{reflect, scatter_dielectric};
+use crate::photon::PhotonMap;
+use crate::photon::trace::spot_falloff;
+use crate::sampling::{Rng, cosine_hemisphere, sample_cdf, uniform_triangle};
+use crate::scene::{LightKind, SpectralScene, SurfaceKind};
+use crate::spectral::spd;
+
+/// What one pass's gather needs.
+pub struct Gather<'a> {
+    pub scene: &'a SpectralScene,
+    pub global: &'a PhotonMap,
+    pub caustic: Option<&'a PhotonMap>,
+    pub r_global: f32,
+    pub r_caustic: f32,
+    pub final_gather_rays: u32,
+    pub max_depth: u32,
+}
+
+/// Per-thread buffers of N bins (the result never depends on their prior content).
+pub struct Scratch {
+    throughput: Vec<f32>,
+    tmp: Vec<f32>,
+    acc: Vec<f32>,
+    fg: Vec<f32>,
+    fg_t: Vec<f32>,
+}
+
+impl Scratch {
+    pub fn new(n: usize) -> Self {
+        Self {
+            throughput: vec![0.0; n],
+            tmp: vec![0.0; n],
+            acc: vec![0.0; n],
+            fg: vec![0.0; n],
+            fg_t: vec![0.0; n],
+        }
+    }
+}
+
+impl Gather<'_> {
+    /// Camera ray direction through image position (x, y) in pixels (may be fractional).
+    pub fn camera_dir(&self, x: f32, y: f32, width: u32, height: u32) -> Vec3 {
+        let c = &self.scene.camera;
+        let tan_y = (0.5 * c.yfov).tan();
+        let aspect = width as f32 / height as f32;
+        let sx = (2.0 * x / width as f32 - 1.0) * tan_y * aspect;
+        let sy = (1.0 - 2.0 * y / height as f32) * tan_y;
+        (c.forward + c.right * sx + c.up * sy).normalize()
+    }
+
+    /// Radiance (N bins) arriving at the camera through pixel (px, py), one jittered sample.
+    pub fn pixel(
+        &self,
+        px: u32,
+        py: u32,
+        width: u32,
+        height: u32,
+        rng: &mut Rng,
+        s: &mut Scratch,
+        out: &mut [f32],
+    ) {
+        out.fill(0.0);
+        let [jx, jy] = rng.next_2d();
+        let dir = self.camera_dir(px as f32 + jx, py as f32 + jy, width, height);
+        self.radiance(self.scene.camera.position, dir, rng, s, out);
+    }
+
+    /// Radiance along a camera ray, added to `out`.
+    fn radiance(
+        &self,
+        mut origin: Vec3,
+        mut dir: Vec3,
+        rng: &mut Rng,
+        s: &mut Scratch,
+        out: &mut [f32],
+    ) {
+        let scene = self.scene;
+        s.throughput.fill(1.0);
+        for _ in 0..self.max_depth {
+            let Some(hit) = scene.accel.intersect(origin, dir, f32::INFINITY) else {
+                return;
+            };
+            let tri = &scene.tris[hit.prim as usize];
+            let mat = &scene.materials[tri.material as usize];
+            let p = origin + dir * hit.t;
+            let n = tri.normal;
+            let front = dir.dot(n) < 0.0;
+            let nf = if front { n } else { -n };
+            // Emitters seen directly or through specular surfaces.
+            if let (Some(e), true) = (&mat.emission, front) {
+                for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(e) {
+                    *o += t * l;
+                }
+            }
+            match &mat.kind {
+                SurfaceKind::Diffuse { reflectance } => {
+                    self.shade_diffuse(p, nf, reflectance, rng, s);
+                    for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(&s.acc) {
+                        *o += t * l;
+                    }
+                    return;
+                }
+                SurfaceKind::Mirror { reflectance } => {
+                    spd::mul_assign(&mut s.throughput, reflectance);
+                    dir = reflect(dir, nf);
+                    origin = scene.accel.offset(p, nf, dir);
+                }
+                SurfaceKind::Dielectric { eta, dispersive } => {
+                    let e = match (dispersive, spd::single_nonzero(&s.throughput)) {
+                        (_, Some(bin)) => eta[bin],
+                        (false, None) => eta[0],
+                        (true, None) => {
+                            // Pick one bin ∝ throughput; weight 1/p keeps it unbiased.
+                            let Some(bin) = pick_bin(&s.throughput, rng.next_f32()) else {
+                                return;
+                            };
+                            let total = spd::sum(&s.throughput);
+                            s.throughput.fill(0.0);
+                            s.throughput[bin] = total;
+                            eta[bin]
+                        }
+                    };
+                    let ev = scatter_dielectric(dir, n, e, rng.next_f32());
+                    if ev.transmitted {
+                        // Radiance crossing into a denser medium is compressed: (ηi/ηt)².
+                        let k = ev.eta_ratio * ev.eta_ratio;
+                        spd::scale(&mut s.throughput, 1.0 / k);
+                    }
+                    dir = ev.dir;
+                    origin = scene.accel.offset(p, n, dir);
+                }
+            }
+            if !(spd::max(&s.throughput) > 0.0) {
+                return;
+            }
+        }
+    }
+
+    /// Outgoing radiance of a diffuse point towards the camera, into `s.acc`.
+    fn shade_diffuse(
+        &self,
+        p: Vec3,
+        nf: Vec3,
+        reflectance: &[f32],
+        rng: &mut Rng,
+        s: &mut Scratch,
+    ) {
+        let inv_pi = std::f32::consts::FRAC_1_PI;
+        s.acc.fill(0.0);
+        if self.final_gather_rays == 0 {
+            // Direct visualisation of the global map: all light in one estimate.
+            self.density(self.global, p, nf, self.r_global, &mut s.acc);
+            spd::mul_assign(&mut s.acc, reflectance);
+            spd::scale(&mut s.acc, inv_pi);
+            return;
+        }
+        // Direct light by light sampling.
+        self.direct(p, nf, rng, &mut s.tmp);
+        spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
+        // Caustics from the caustic map (irradiance, converted to radiance below).
+        if let Some(cm) = self.caustic {
+            self.density(cm, p, nf, self.r_caustic, &mut s.tmp);
+            spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
+        }
+        // Indirect light: final gather. Cosine sampling makes each ray's weight ρ, i.e.
+        // irradiance π·mean(L), so it joins the other irradiance terms.
+        s.fg.fill(0.0);
+        for _ in 0..self.final_gather_rays {
+            let dir = cosine_hemisphere(nf, rng.next_2d());
+            self.final_gather_ray(
+                self.scene.accel.offset(p, nf, dir),
+                dir,
+                rng,
+                &mut s.fg_t,
+                &mut s.tmp,
+            );
+            spd::add_scaled(&mut s.fg, &s.tmp, 1.0);
+        }
+        spd::add_scaled(
+            &mut s.acc,
+            &s.fg,
+            std::f32::consts::PI / self.final_gather_rays as f32,
+        );
+        spd::mul_assign(&mut s.acc, reflectance);
+        spd::scale(&mut s.acc, inv_pi);
+    }
+
+    /// Radiance along a final-gather ray from the global map at its first diffuse hit
+    /// (through mirrors and glass). Emitters are not counted: direct light and caustics
+    /// have their own estimates.
+    fn final_gather_ray(
+        &self,
+        mut origin: Vec3,
+        mut dir: Vec3,
+        rng: &mut Rng,
+        t: &mut [f32],
+        out: &mut [f32],
+    ) {
+        let scene = self.scene;
+        out.fill(0.0);
+        t.fill(1.0);
+        for _ in 0..self.max_depth {
+            let Some(hit) = scene.accel.intersect(origin, dir, f32::INFINITY) else {
+                return;
+            };
+            let tri = &scene.tris[hit.prim as usize];
+            let mat = &scene.materials[tri.material as usize];
+            let p = origin + dir * hit.t;
+            let n = tri.normal;
+            let nf = if dir.dot(n) < 0.0 { n } else { -n };
+            match &mat.kind {
+                SurfaceKind::Diffuse { reflectance } => {
+                    self.density(self.global, p, nf, self.r_global, out);
+                    spd::mul_assign(out, reflectance);
+                    spd::mul_assign(out, t);
+                    spd::scale(out, std::f32::consts::FRAC_1_PI);
+                    return;
+                }
+                SurfaceKind::Mirror { reflectance } => {
+                    spd::mul_assign(t, reflectance);
+                    dir = reflect(dir, nf);
+                    origin = scene.accel.offset(p, nf, dir);
+                }
+                SurfaceKind::Dielectric { eta, dispersive } => {
+                    let e = match (dispersive, spd::single_nonzero(t)) {
+                        (_, Some(bin)) => eta[bin],
+                        (false, None) => eta[0],
+                        (true, None) => {
+                            let Some(bin) = pick_bin(t, rng.next_f32()) else {
+                                return;
+                            };
+                            let total = spd::sum(t);
+                            t.fill(0.0);
+                            t[bin] = total;
+                            eta[bin]
+                        }
+                    };
+                    let ev = scatter_dielectric(dir, n, e, rng.next_f32());
+                    if ev.transmitted {
+                        spd::scale(t, 1.0 / (ev.eta_ratio * ev.eta_ratio));
+                    }
+                    dir = ev.dir;
+                    origin = scene.accel.offset(p, n, dir);
+                }
+            }
+        }
+    }
+
+    /// Irradiance estimate (N bins) from a photon map: Σ flux / (π r²), into `out`.
+    fn density(&self, map: &PhotonMap, p: Vec3, nf: Vec3, r: f32, out: &mut [f32]) {
+        out.fill(0.0);
+        map.gather(&self.scene.grid, p, nf, r, out);
+        spd::scale(out, 1.0 / (std::f32::consts::PI * r * r));
+    }
+
+    /// Irradiance from one light sample (N bins), into `out`.
+    fn direct(&self, p: Vec3, nf: Vec3, rng: &mut Rng, out: &mut [f32]) {
+        out.fill(0.0);
+        let scene = self.scene;
+        if scene.lights.is_empty() {
+            return;
+        }
+        let li = sample_cdf(&scene.direct_cdf, rng.next_f32());
+        let pmf = scene.direct_pmf[li];
+        let light = &scene.lights[li];
+        let uv = rng.next_2d();
+        if !(pmf > 0.0) {
+            return;
+        }
+        let (target, weight) = match light.kind {
+            LightKind::Area { tri } => {
+                let t = &scene.tris[tri as usize];
+                let (b1, b2) = uniform_triangle(uv);
+                let y = t.v0 + t.e1 * b1 + t.e2 * b2;
+                let w = y - p;
+                let d2 = w.length_squared();
+                let wn = w / d2.sqrt();
+                let cos_l = -t.normal.dot(wn);
+                if cos_l <= 0.0 {
+                    return;
+                }
+                (y, cos_l * t.area / d2)
+            }
+            LightKind::Point { position } => (position, 1.0 / (position - p).length_squared()),
+            LightKind::Spot {
+                position,
+                axis,
+                cos_outer,
+                cos_inner,
+            } => {
+                let w = p - position;
+                let d2 = w.length_squared();
+                let f = spot_falloff((w / d2.sqrt()).dot(axis), cos_outer, cos_inner);
+                if f <= 0.0 {
+                    return;
+                }
+                (position, f / d2)
+            }
+        };
+        let w = target - p;
+        let dist = w.length();
+        let wn = w / dist;
+        let cos_x = nf.dot(wn);
+        if !(cos_x > 0.0 && weight.is_finite() && weight > 0.0) {
+            return;
+        }
+        let origin = scene.accel.offset(p, nf, wn);
+        if scene.accel.occluded(origin, wn, dist * (1.0 - 1e-4)) {
+            return;
+        }
+        out.copy_from_slice(&light.spectrum);
+        spd::scale(out, cos_x * weight / pmf);
+    }
+}
+
+/// A bin drawn with probability ∝ `t`.
+fn pick_bin(t: &[f32], u: f32) -> Option<usize> {
+    let total = spd::sum(t);
+    if !(total > 0.0) {
+        return None;
+    }
+    let target = u * total;
+    let mut acc = 0.0;
+    let mut last = None;
+    for (i, &v) in t.iter().enumerate() {
+        if v > 0.0 {
+            acc += v;
+            last = Some(i);
+            if acc > target {
+                return Some(i);
+            }
+        }
+    }
+    last
+}

@@ -1,0 +1,200 @@
+//! Random streams and warps.
+//!
+//! Every stream is keyed by `(seed, pass, index, purpose)` and hashed into a PCG32 state,
+//! so a photon's or a pixel's random numbers do not depend on which thread runs it: the
+//! same settings give the same image on 1 thread or 16.
+
+use glam::Vec3;
+use std::f32::consts::PI;
+
+/// What a stream is for; keeps the photon and camera streams of one index apart.
+#[derive(Clone, Copy, Debug)]
+#[repr(u64)]
+pub enum Purpose {
+    Photon = 1,
+    Camera = 2,
+    RadiusEstimate = 3,
+}
+
+/// PCG32 (O'Neill 2014, XSH-RR).
+#[derive(Clone, Debug)]
+pub struct Rng {
+    state: u64,
+    inc: u64,
+}
+
+/// SplitMix64 finaliser: a good 64-bit mixer.
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+impl Rng {
+    pub fn stream(seed: u64, pass: u64, index: u64, purpose: Purpose) -> Self {
+        let a = mix(seed ^ mix(pass ^ mix(index ^ mix(purpose as u64))));
+        let b = mix(a ^ 0xDA94_2042_E4DD_58B5);
+        let mut rng = Self {
+            state: 0,
+            inc: (b << 1) | 1,
+        };
+        rng.next_u32();
+        rng.state = rng.state.wrapping_add(a);
+        rng.next_u32();
+        rng
+    }
+
+    #[inline]
+    pub fn next_u32(&mut self) -> u32 {
+        let old = self.state;
+        self.state = old
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(self.inc);
+        let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
+        let rot = (old >> 59) as u32;
+        xorshifted.rotate_right(rot)
+    }
+
+    /// Uniform in [0, 1): 24 random bits, so 1 − 2⁻²⁴ is the largest value.
+    #[inline]
+    pub fn next_f32(&mut self) -> f32 {
+        (self.next_u32() >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+    }
+
+    #[inline]
+    pub fn next_2d(&mut self) -> [f32; 2] {
+        [self.next_f32(), self.next_f32()]
+    }
+}
+
+/// An orthonormal basis around unit `n` (Duff et al. 2017), returned as (t, b).
+#[inline]
+pub fn basis(n: Vec3) -> (Vec3, Vec3) {
+    let sign = 1.0f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        Vec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
+
+/// Cosine-weighted direction about unit `n`; pdf = cos θ / π.
+#[inline]
+pub fn cosine_hemisphere(n: Vec3, u: [f32; 2]) -> Vec3 {
+    let r = u[0].sqrt();
+    let phi = 2.0 * PI * u[1];
+    let (t, b) = basis(n);
+    let z = (1.0 - u[0]).max(0.0).sqrt();
+    (t * (r * phi.cos()) + b * (r * phi.sin()) + n * z).normalize()
+}
+
+/// Uniform direction on the sphere; pdf = 1 / 4π.
+#[inline]
+pub fn uniform_sphere(u: [f32; 2]) -> Vec3 {
+    let z = 1.0 - 2.0 * u[0];
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u[1];
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Uniform direction in the cone of half-angle acos(`cos_max`) about unit `axis`;
+/// pdf = 1 / (2π (1 − cos_max)).
+#[inline]
+pub fn uniform_cone(axis: Vec3, cos_max: f32, u: [f32; 2]) -> Vec3 {
+    let cos_t = 1.0 - u[0] * (1.0 - cos_max);
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = 2.0 * PI * u[1];
+    let (t, b) = basis(axis);
+    (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + axis * cos_t).normalize()
+}
+
+/// Uniform barycentrics (b1, b2) on a triangle (square-root warp).
+#[inline]
+pub fn uniform_triangle(u: [f32; 2]) -> (f32, f32) {
+    let su = u[0].sqrt();
+    (1.0 - su, u[1] * su)
+}
+
+/// Index `i` with probability `weights[i] / Σ weights` from a CDF built by [`cdf`].
+pub fn sample_cdf(cdf: &[f32], u: f32) -> usize {
+    let total = *cdf.last().unwrap_or(&0.0);
+    let target = u * total;
+    cdf.partition_point(|&c| c <= target)
+        .min(cdf.len().saturating_sub(1))
+}
+
+/// Running sums of `weights` (negative or NaN weights count as 0).
+pub fn cdf(weights: &[f32]) -> Vec<f32> {
+    let mut acc = 0.0f32;
+    weights
+        .iter()
+        .map(|&w| {
+            acc += if w.is_finite() && w > 0.0 { w } else { 0.0 };
+            acc
+        })
+        .collect()
+}
+
+#[cfg(test)]
+pub mod chi2;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn streams_are_reproducible_and_distinct() {
+        let a: Vec<u32> = {
+            let mut r = Rng::stream(7, 1, 42, Purpose::Photon);
+            (0..8).map(|_| r.next_u32()).collect()
+        };
+        let b: Vec<u32> = {
+            let mut r = Rng::stream(7, 1, 42, Purpose::Photon);
+            (0..8).map(|_| r.next_u32()).collect()
+        };
+        let c: Vec<u32> = {
+            let mut r = Rng::stream(7, 1, 43, Purpose::Photon);
+            (0..8).map(|_| r.next_u32()).collect()
+        };
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+    }
+
+    #[test]
+    fn uniform_floats_stay_below_one_and_average_half() {
+        let mut r = Rng::stream(1, 2, 3, Purpose::Camera);
+        let mut sum = 0.0f64;
+        for _ in 0..100_000 {
+            let v = r.next_f32();
+            assert!((0.0..1.0).contains(&v));
+            sum += v as f64;
+        }
+        assert!((sum / 100_000.0 - 0.5).abs() < 0.005);
+    }
+
+    #[test]
+    fn warps_survive_extreme_inputs() {
+        let n = Vec3::new(0.0, 0.0, -1.0);
+        for u in [0.0, 0.5, 1.0 - f32::EPSILON / 2.0, 1.0] {
+            for v in [0.0, 0.5, 0.99999994] {
+                let d = cosine_hemisphere(n, [u, v]);
+                assert!(d.is_finite() && (d.length() - 1.0).abs() < 1e-4 && d.dot(n) >= -1e-6);
+                let s = uniform_sphere([u, v]);
+                assert!(s.is_finite());
+                let c = uniform_cone(n, 0.99, [u, v]);
+                assert!(c.is_finite() && c.dot(n) >= 0.99 - 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn cdf_sampling_respects_weights() {
+        let c = cdf(&[1.0, 0.0, 3.0, f32::NAN]);
+        assert_eq!(sample_cdf(&c, 0.0), 0);
+        assert_eq!(sample_cdf(&c, 0.2), 0);
+        assert_eq!(sample_cdf(&c, 0.3), 2);
+        assert_eq!(sample_cdf(&c, 0.999), 2);
+    }
+}

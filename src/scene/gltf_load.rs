@@ -1,0 +1,590 @@
+//! glTF 2.0 → [`Scene`]. Never panics on user input: every failure is a [`SceneError`]
+//! naming the file, the element and the value; `catch_unwind` around the `gltf` crate is
+//! the backstop for its known panics on malformed data.
+
+use std::path::{Component, Path};
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3};
+use serde::Deserialize;
+
+use super::{Camera, Material, MaterialKind, PunctualKind, PunctualLight, Scene, SceneError};
+use crate::geometry::triangle_normal;
+use crate::spectral::tables::{PiecewiseLinear, fl11, parse_numeric_csv};
+use crate::spectral::{IorModel, Spectrum};
+
+/// Extensions this loader understands (anything else in `extensionsRequired` is refused).
+const SUPPORTED_EXTENSIONS: &[&str] = &[
+    "KHR_lights_punctual",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_ior",
+    "KHR_materials_transmission",
+    "KHR_materials_volume",
+    "KHR_materials_dispersion",
+];
+
+/// Deepest node hierarchy accepted (deeper is almost surely a cycle).
+const MAX_NODE_DEPTH: usize = 64;
+
+/// The part of `extras` this program reads: `{"prismap": {...}}`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PrismapExtras {
+    /// A named Sellmeier glass (see `assets/data/glass_sellmeier.csv`).
+    glass: Option<String>,
+    emission: Option<EmissionExtras>,
+}
+
+/// The spectral shape of an emitter; its luminance comes from the glTF colour.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EmissionExtras {
+    blackbody_k: Option<f64>,
+    /// A built-in illuminant: "D65", "E" or "FL11".
+    illuminant: Option<String>,
+    /// A CSV file (wavelength_nm,value), relative to the glTF file.
+    spd_csv: Option<String>,
+}
+
+struct Ctx<'a> {
+    file: &'a str,
+    base: Option<&'a Path>,
+}
+
+impl Ctx<'_> {
+    fn err(&self, element: impl Into<String>, message: impl Into<String>) -> SceneError {
+        SceneError::Invalid {
+            file: self.file.to_string(),
+            element: element.into(),
+            message: message.into(),
+        }
+    }
+}
+
+/// Loads a `.gltf` or `.glb` file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let file = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".to_string());
+    let mut scene = load_from_slice(&bytes, &file, path.parent())?;
+    scene.name = name;
+    Ok(scene)
+}
+
+/// Loads glTF from memory; `base` resolves external buffers and SPD files (None: only
+/// embedded data is allowed).
+pub fn load_from_slice(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<Scene, SceneError> {
+    let ctx = Ctx { file, base };
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load_inner(bytes, &ctx))) {
+        Ok(result) => result,
+        Err(_) => Err(ctx.err("document", "malformed glTF (the glTF reader failed on it)")),
+    }
+}
+
+fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
+    if bytes.is_empty() {
+        return Err(ctx.err("document", "the file is empty"));
+    }
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| ctx.err("document", e.to_string()))?;
+    let doc = &gltf.document;
+    for ext in doc.extensions_required() {
+        if !SUPPORTED_EXTENSIONS.contains(&ext) {
+            return Err(ctx.err(
+                "extensionsRequired",
+                format!("unsupported required extension '{ext}'"),
+            ));
+        }
+    }
+    for buffer in doc.buffers() {
+        if let gltf::buffer::Source::Uri(uri) = buffer.source() {
+            check_relative_uri(uri, ctx, &format!("buffers[{}]", buffer.index()))?;
+            if !uri.starts_with("data:") && ctx.base.is_none() {
+                return Err(ctx.err(
+                    format!("buffers[{}]", buffer.index()),
+                    format!("external buffer '{uri}' but no folder to read it from"),
+                ));
+            }
+        }
+    }
+    let buffers = gltf::import_buffers(doc, ctx.base, gltf.blob.clone())
+        .map_err(|e| ctx.err("buffers", e.to_string()))?;
+    let root = doc
+        .default_scene()
+        .or_else(|| doc.scenes().next())
+        .ok_or_else(|| ctx.err("scenes", "the file has no scene"))?;
+
+    let mut out = Scene {
+        name: "scene".to_string(),
+        triangles: Vec::new(),
+        triangle_material: Vec::new(),
+        materials: Vec::new(),
+        lights: Vec::new(),
+        camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 0.8),
+        warnings: Vec::new(),
+    };
+    // glTF material index → ours; the default material goes last.
+    let mut material_map: Vec<Option<u32>> = vec![None; doc.materials().len() + 1];
+    let mut camera = None;
+    let mut degenerate = 0usize;
+
+    let mut stack: Vec<(gltf::Node, Mat4, usize)> =
+        root.nodes().map(|n| (n, Mat4::IDENTITY, 0)).collect();
+    while let Some((node, parent, depth)) = stack.pop() {
+        let element = format!("nodes[{}]", node.index());
+        if depth > MAX_NODE_DEPTH {
+            return Err(ctx.err(element, "node hierarchy deeper than 64 (a cycle?)"));
+        }
+        let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+        let world = parent * local;
+        if !world.is_finite() {
+            return Err(ctx.err(element, "transform is not finite"));
+        }
+        if let Some(mesh) = node.mesh() {
+            for prim in mesh.primitives() {
+                let pel = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
+                if prim.mode() != gltf::mesh::Mode::Triangles {
+                    out.warnings.push(format!(
+                        "{pel}: mode {:?} skipped (only triangles are rendered)",
+                        prim.mode()
+                    ));
+                    continue;
+                }
+                let mat_slot = prim.material().index().unwrap_or(doc.materials().len());
+                let mat_index = match material_map[mat_slot] {
+                    Some(i) => i,
+                    None => {
+                        let m = read_material(&prim.material(), ctx, &mut out.warnings)?;
+                        out.materials.push(m);
+                        let i = (out.materials.len() - 1) as u32;
+                        material_map[mat_slot] = Some(i);
+                        i
+                    }
+                };
+                let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+                let positions: Vec<Vec3> = reader
+                    .read_positions()
+                    .ok_or_else(|| ctx.err(&pel, "no POSITION attribute"))?
+                    .map(Vec3::from)
+                    .collect();
+                if let Some((i, p)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
+                    return Err(ctx.err(
+                        format!("{pel}.POSITION[{i}]"),
+                        format!("value {p} is not finite"),
+                    ));
+                }
+                let indices: Vec<u32> = match reader.read_indices() {
+                    Some(ix) => ix.into_u32().collect(),
+                    None => (0..positions.len() as u32).collect(),
+                };
+                if indices.len() % 3 != 0 {
+                    return Err(ctx.err(
+                        &pel,
+                        format!("{} indices is not a multiple of 3", indices.len()),
+                    ));
+                }
+                if let Some(bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
+                    return Err(ctx.err(
+                        format!("{pel}.indices"),
+                        format!("index {bad} out of range for {} vertices", positions.len()),
+                    ));
+                }
+                for tri in indices.chunks_exact(3) {
+                    let t = [0, 1, 2].map(|k| world.transform_point3(positions[tri[k] as usize]));
+                    if t.iter().any(|v| !v.is_finite()) {
+                        return Err(ctx.err(&pel, "transformed vertex is not finite"));
+                    }
+                    if triangle_normal(&t).0 == 0.0 {
+                        degenerate += 1;
+                        continue;
+                    }
+                    out.triangles.push(t);
+                    out.triangle_material.push(mat_index);
+                }
+            }
+        }
+        if let Some(light) = node.light() {
+            out.lights.push(read_light(&light, &world, ctx)?);
+        }
+        if let (Some(cam), None) = (node.camera(), &camera) {
+            camera = Some(read_camera(&cam, &world, ctx, &mut out.warnings)?);
+        }
+        for child in node.children() {
+            stack.push((child, world, depth + 1));
+        }
+    }
+    if degenerate > 0 {
+        out.warnings.push(format!(
+            "{degenerate} degenerate (zero-area) triangles skipped"
+        ));
+    }
+    if out.triangles.is_empty() {
+        return Err(ctx.err("meshes", "the scene has no triangles"));
+    }
+    let emissive = out
+        .triangle_material
+        .iter()
+        .any(|&m| out.materials[m as usize].emission.is_some());
+    if !emissive && out.lights.is_empty() {
+        return Err(ctx.err(
+            "lights",
+            "the scene has no light (no emissive material on a triangle, no KHR_lights_punctual light)",
+        ));
+    }
+    out.camera = match camera {
+        Some(c) => c,
+        None => {
+            out.warnings
+                .push("no camera in the scene: framing its bounds".to_string());
+            let (lo, hi) = out.bounds();
+            let c = 0.5 * (lo + hi);
+            let r = 0.5 * (hi - lo).length().max(1e-3);
+            Camera::look_at(
+                c + Vec3::new(0.0, 0.3 * r, 2.4 * r),
+                c,
+                Vec3::Y,
+                45f32.to_radians(),
+            )
+        }
+    };
+    Ok(out)
+}
+
+/// Refuses absolute paths and `..` in external references (they could read outside the
+/// scene's folder).
+fn check_relative_uri(uri: &str, ctx: &Ctx, element: &str) -> Result<(), SceneError> {
+    if uri.starts_with("data:") {
+        return Ok(());
+    }
+    let p = Path::new(uri);
+    if p.is_absolute()
+        || uri.contains("://")
+        || p.components()
+            .any(|c| matches!(c, Component::ParentDir | Component::Prefix(_)))
+    {
+        return Err(ctx.err(
+            element,
+            format!("uri '{uri}' must be a relative path inside the scene's folder"),
+        ));
+    }
+    Ok(())
+}
+
+fn parse_extras(
+    raw: &gltf::json::Extras,
+    ctx: &Ctx,
+    element: &str,
+) -> Result<PrismapExtras, SceneError> {
+    let Some(raw) = raw else {
+        return Ok(PrismapExtras::default());
+    };
+    let value: serde_json::Value = serde_json::from_str(raw.get())
+        .map_err(|e| ctx.err(format!("{element}.extras"), e.to_string()))?;
+    match value.get("prismap") {
+        None => Ok(PrismapExtras::default()),
+        Some(v) => serde_json::from_value(v.clone())
+            .map_err(|e| ctx.err(format!("{element}.extras.prismap"), e.to_string())),
+    }
+}
+
+fn finite_rgb(rgb: [f32; 3], ctx: &Ctx, element: &str, what: &str) -> Result<[f64; 3], SceneError> {
+    if rgb.iter().any(|v| !v.is_finite() || *v < 0.0) {
+        return Err(ctx.err(element, format!("{what} {rgb:?} must be finite and ≥ 0")));
+    }
+    Ok(rgb.map(f64::from))
+}
+
+/// The emission spectrum: the glTF colour's luminance, the extras' spectral shape.
+fn emission_spectrum(
+    rgb: [f64; 3],
+    extras: Option<&EmissionExtras>,
+    ctx: &Ctx,
+    element: &str,
+) -> Result<Spectrum, SceneError> {
+    let Some(e) = extras else {
+        return Ok(Spectrum::Illuminant(rgb));
+    };
+    let el = format!("{element}.extras.prismap.emission");
+    let set = [
+        e.blackbody_k.is_some(),
+        e.illuminant.is_some(),
+        e.spd_csv.is_some(),
+    ];
+    if set.iter().filter(|&&b| b).count() != 1 {
+        return Err(ctx.err(el, "give exactly one of blackbody_k, illuminant, spd_csv"));
+    }
+    let luminance = Spectrum::rgb_luminance(rgb);
+    let normalise = |shape: Spectrum, what: &str| -> Result<Spectrum, SceneError> {
+        let y = shape.luminance();
+        if !(y.is_finite() && y > 0.0) {
+            return Err(ctx.err(&el, format!("{what} has no visible luminance")));
+        }
+        Ok(Spectrum::Scaled(luminance / y, Arc::new(shape)))
+    };
+    if let Some(k) = e.blackbody_k {
+        return Spectrum::blackbody(k, luminance)
+            .map_err(|err| ctx.err(format!("{el}.blackbody_k"), err.to_string()));
+    }
+    if let Some(name) = &e.illuminant {
+        let shape = match name.to_ascii_uppercase().as_str() {
+            "D65" => Spectrum::Illuminant([1.0, 1.0, 1.0]),
+            "E" => Spectrum::Constant(1.0),
+            "FL11" | "F11" => Spectrum::Table(Arc::new(fl11().clone())),
+            _ => {
+                return Err(ctx.err(
+                    format!("{el}.illuminant"),
+                    format!("unknown illuminant '{name}' (known: D65, E, FL11)"),
+                ));
+            }
+        };
+        return normalise(shape, name);
+    }
+    let rel = e.spd_csv.as_deref().unwrap_or_default();
+    check_relative_uri(rel, ctx, &format!("{el}.spd_csv"))?;
+    let path = ctx
+        .base
+        .map(|b| b.join(rel))
+        .ok_or_else(|| ctx.err(format!("{el}.spd_csv"), "no folder to read it from"))?;
+    let table = read_spd_csv(&path)
+        .map_err(|m| ctx.err(format!("{el}.spd_csv"), format!("{}: {m}", path.display())))?;
+    normalise(Spectrum::Table(Arc::new(table)), rel)
+}
+
+/// Reads a measured SPD: `wavelength_nm,value` rows, increasing wavelengths, values ≥ 0.
+pub fn read_spd_csv(path: &Path) -> Result<PiecewiseLinear, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+    parse_spd_csv(&text)
+}
+
+pub fn parse_spd_csv(text: &str) -> Result<PiecewiseLinear, String> {
+    let rows = parse_numeric_csv(text, 2).map_err(|e| e.to_string())?;
+    let (xs, ys): (Vec<f64>, Vec<f64>) = rows.iter().map(|r| (r[0], r[1])).unzip();
+    if let Some((i, v)) = ys.iter().enumerate().find(|(_, v)| **v < 0.0) {
+        return Err(format!("value {v} at data row {} is negative", i + 1));
+    }
+    PiecewiseLinear::new(xs, ys).map_err(|e| e.to_string())
+}
+
+fn read_material(
+    m: &gltf::Material,
+    ctx: &Ctx,
+    warnings: &mut Vec<String>,
+) -> Result<Material, SceneError> {
+    let element = match m.index() {
+        Some(i) => format!("materials[{i}]"),
+        None => "default material".to_string(),
+    };
+    let name = m
+        .name()
+        .map(str::to_string)
+        .unwrap_or_else(|| element.clone());
+    let extras = parse_extras(m.extras(), ctx, &element)?;
+    let pbr = m.pbr_metallic_roughness();
+    let base = pbr.base_color_factor();
+    let base_rgb = finite_rgb(
+        [base[0], base[1], base[2]],
+        ctx,
+        &element,
+        "baseColorFactor",
+    )?;
+    if pbr.base_color_texture().is_some() {
+        warnings.push(format!(
+            "{element} '{name}': base colour texture ignored (factor used)"
+        ));
+    }
+    let transmission = m
+        .transmission()
+        .map(|t| t.transmission_factor())
+        .unwrap_or(0.0);
+    let kind = if transmission > 0.0 || extras.glass.is_some() {
+        if transmission > 0.0 && transmission < 1.0 {
+            warnings.push(format!(
+                "{element} '{name}': transmission {transmission} rendered as clear glass"
+            ));
+        }
+        let ior = if let Some(glass) = &extras.glass {
+            IorModel::glass(glass)
+                .map_err(|e| ctx.err(format!("{element}.extras.prismap.glass"), e.to_string()))?
+        } else {
+            let n = m.ior().unwrap_or(1.5) as f64;
+            let dispersion = m
+                .extension_value("KHR_materials_dispersion")
+                .and_then(|v| v.get("dispersion"))
+                .map(|v| {
+                    v.as_f64().ok_or_else(|| {
+                        ctx.err(
+                            format!("{element}.KHR_materials_dispersion.dispersion"),
+                            format!("{v} is not a number"),
+                        )
+                    })
+                })
+                .transpose()?
+                .unwrap_or(0.0);
+            if !(dispersion.is_finite() && dispersion >= 0.0) {
+                return Err(ctx.err(
+                    format!("{element}.KHR_materials_dispersion.dispersion"),
+                    format!("{dispersion} must be finite and ≥ 0"),
+                ));
+            }
+            if dispersion > 0.0 {
+                // glTF: V_d = 20 / dispersion.
+                IorModel::abbe(n, 20.0 / dispersion)
+            } else {
+                IorModel::constant(n)
+            }
+            .map_err(|e| ctx.err(format!("{element}.ior"), e.to_string()))?
+        };
+        ior.validate(360.0, 830.0)
+            .map_err(|e| ctx.err(&element, e.to_string()))?;
+        MaterialKind::Dielectric { ior }
+    } else if pbr.metallic_factor() >= 0.99 && pbr.roughness_factor() <= 0.05 {
+        MaterialKind::Mirror {
+            reflectance: Spectrum::Reflectance(base_rgb),
+        }
+    } else {
+        if pbr.metallic_factor() > 0.0 && m.index().is_some() {
+            warnings.push(format!(
+                "{element} '{name}': metallic {} roughness {} rendered as diffuse",
+                pbr.metallic_factor(),
+                pbr.roughness_factor()
+            ));
+        }
+        MaterialKind::Diffuse {
+            reflectance: Spectrum::Reflectance(base_rgb),
+        }
+    };
+    let strength = m.emissive_strength().unwrap_or(1.0);
+    if !(strength.is_finite() && strength >= 0.0) {
+        return Err(ctx.err(
+            format!("{element}.KHR_materials_emissive_strength"),
+            format!("{strength} must be finite and ≥ 0"),
+        ));
+    }
+    let e = finite_rgb(m.emissive_factor(), ctx, &element, "emissiveFactor")?;
+    let rgb = e.map(|v| v * strength as f64);
+    let emission = if rgb.iter().any(|&v| v > 0.0) {
+        Some(emission_spectrum(
+            rgb,
+            extras.emission.as_ref(),
+            ctx,
+            &element,
+        )?)
+    } else {
+        if extras.emission.is_some() {
+            warnings.push(format!(
+                "{element} '{name}': extras emission ignored (emissiveFactor is black)"
+            ));
+        }
+        None
+    };
+    Ok(Material {
+        name,
+        kind,
+        emission,
+    })
+}
+
+fn read_light(
+    light: &gltf::khr_lights_punctual::Light,
+    world: &Mat4,
+    ctx: &Ctx,
+) -> Result<PunctualLight, SceneError> {
+    let element = format!("KHR_lights_punctual.lights[{}]", light.index());
+    let name = light
+        .name()
+        .map(str::to_string)
+        .unwrap_or_else(|| element.clone());
+    let intensity = light.intensity();
+    if !(intensity.is_finite() && intensity >= 0.0) {
+        return Err(ctx.err(
+            &element,
+            format!("intensity {intensity} must be finite and ≥ 0"),
+        ));
+    }
+    let color = finite_rgb(light.color(), ctx, &element, "color")?;
+    let rgb = color.map(|c| c * intensity as f64);
+    let extras = parse_extras(light.extras(), ctx, &element)?;
+    let spectrum = emission_spectrum(rgb, extras.emission.as_ref(), ctx, &element)?;
+    let position = world.transform_point3(Vec3::ZERO);
+    let kind = match light.kind() {
+        gltf::khr_lights_punctual::Kind::Point => PunctualKind::Point,
+        gltf::khr_lights_punctual::Kind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } => {
+            if !(outer_cone_angle > 0.0 && outer_cone_angle <= std::f32::consts::FRAC_PI_2) {
+                return Err(ctx.err(
+                    &element,
+                    format!("outerConeAngle {outer_cone_angle} must be in (0, π/2]"),
+                ));
+            }
+            if !(inner_cone_angle >= 0.0 && inner_cone_angle < outer_cone_angle) {
+                return Err(ctx.err(
+                    &element,
+                    format!("innerConeAngle {inner_cone_angle} must be in [0, outerConeAngle)"),
+                ));
+            }
+            let direction = world.transform_vector3(-Vec3::Z).normalize_or_zero();
+            if direction == Vec3::ZERO {
+                return Err(ctx.err(&element, "spot direction is degenerate (zero scale?)"));
+            }
+            PunctualKind::Spot {
+                direction,
+                inner: inner_cone_angle,
+                outer: outer_cone_angle,
+            }
+        }
+        gltf::khr_lights_punctual::Kind::Directional => {
+            return Err(ctx.err(
+                &element,
+                "directional lights are not supported (use a spot or an emissive quad)",
+            ));
+        }
+    };
+    Ok(PunctualLight {
+        name,
+        position,
+        kind,
+        intensity: spectrum,
+    })
+}
+
+fn read_camera(
+    cam: &gltf::Camera,
+    world: &Mat4,
+    ctx: &Ctx,
+    warnings: &mut Vec<String>,
+) -> Result<Camera, SceneError> {
+    let element = format!("cameras[{}]", cam.index());
+    let yfov = match cam.projection() {
+        gltf::camera::Projection::Perspective(p) => p.yfov(),
+        gltf::camera::Projection::Orthographic(_) => {
+            warnings.push(format!(
+                "{element}: orthographic camera rendered as a 45° perspective"
+            ));
+            45f32.to_radians()
+        }
+    };
+    if !(yfov.is_finite() && yfov > 1e-4 && yfov < std::f32::consts::PI - 1e-4) {
+        return Err(ctx.err(&element, format!("yfov {yfov} must be in (0, π)")));
+    }
+    let position = world.transform_point3(Vec3::ZERO);
+    let forward = world.transform_vector3(-Vec3::Z).normalize_or_zero();
+    let up = world.transform_vector3(Vec3::Y).normalize_or_zero();
+    let right = forward.cross(up).normalize_or_zero();
+    if right == Vec3::ZERO {
+        return Err(ctx.err(&element, "camera transform is degenerate"));
+    }
+    Ok(Camera {
+        position,
+        forward,
+        up: right.cross(forward),
+        right,
+        yfov,
+    })
+}

@@ -1,0 +1,108 @@
+//! Colorimetry: XYZ ↔ linear sRGB (D65) and the sRGB transfer curve.
+
+/// XYZ → linear sRGB (IEC 61966-2-1, D65 white).
+pub const XYZ_TO_SRGB: [[f64; 3]; 3] = [
+    [3.2404542, -1.5371385, -0.4985314],
+    [-0.9692660, 1.8760108, 0.0415560],
+    [0.0556434, -0.2040259, 1.0572252],
+];
+
+/// Linear sRGB → XYZ (the inverse of [`XYZ_TO_SRGB`]).
+pub const SRGB_TO_XYZ: [[f64; 3]; 3] = [
+    [0.4124564, 0.3575761, 0.1804375],
+    [0.2126729, 0.7151522, 0.0721750],
+    [0.0193339, 0.1191920, 0.9503041],
+];
+
+pub fn mul3(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
+    [
+        m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
+        m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
+        m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2],
+    ]
+}
+
+pub fn xyz_to_linear_srgb(xyz: [f64; 3]) -> [f64; 3] {
+    mul3(&XYZ_TO_SRGB, xyz)
+}
+
+pub fn linear_srgb_to_xyz(rgb: [f64; 3]) -> [f64; 3] {
+    mul3(&SRGB_TO_XYZ, rgb)
+}
+
+/// Relative luminance Y of a linear sRGB colour.
+pub fn luminance(rgb: [f64; 3]) -> f64 {
+    SRGB_TO_XYZ[1][0] * rgb[0] + SRGB_TO_XYZ[1][1] * rgb[1] + SRGB_TO_XYZ[1][2] * rgb[2]
+}
+
+/// The sRGB opto-electronic transfer function on one linear channel (clamped to [0, 1]).
+pub fn srgb_encode(v: f32) -> f32 {
+    let v = if v.is_finite() {
+        v.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    if v <= 0.0031308 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Inverse of [`srgb_encode`].
+pub fn srgb_decode(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Inverse of a 3×3 matrix, or `None` when it is (numerically) singular.
+pub fn invert3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+    let [a, b, c] = m[0];
+    let [d, e, f] = m[1];
+    let [g, h, i] = m[2];
+    let co = [e * i - f * h, f * g - d * i, d * h - e * g];
+    let det = a * co[0] + b * co[1] + c * co[2];
+    let scale = m.iter().flatten().fold(0.0f64, |s, v| s.max(v.abs()));
+    if !det.is_finite() || det.abs() <= 1e-12 * scale.powi(3) {
+        return None;
+    }
+    let r = 1.0 / det;
+    Some([
+        [co[0] * r, (c * h - b * i) * r, (b * f - c * e) * r],
+        [co[1] * r, (a * i - c * g) * r, (c * d - a * f) * r],
+        [co[2] * r, (b * g - a * h) * r, (a * e - b * d) * r],
+    ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn matrices_are_inverse() {
+        let p = mul3(&XYZ_TO_SRGB, mul3(&SRGB_TO_XYZ, [0.3, 0.5, 0.9]));
+        for (a, b) in p.iter().zip([0.3, 0.5, 0.9]) {
+            assert!((a - b).abs() < 1e-6);
+        }
+        let inv = invert3(&SRGB_TO_XYZ).unwrap();
+        for r in 0..3 {
+            for c in 0..3 {
+                assert!((inv[r][c] - XYZ_TO_SRGB[r][c]).abs() < 1e-5);
+            }
+        }
+        assert!(invert3(&[[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]]).is_none());
+    }
+
+    #[test]
+    fn srgb_curve_round_trips() {
+        for i in 0..=100 {
+            let v = i as f32 / 100.0;
+            assert!((srgb_decode(srgb_encode(v)) - v).abs() < 1e-5);
+        }
+        assert_eq!(srgb_encode(f32::NAN), 0.0);
+        assert!((srgb_encode(7.0) - 1.0).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,17 @@
+//! Spectral core: the CIE and Smits tables, continuous spectra, the runtime bin grid,
+//! colour conversion and index-of-refraction models.
+
+pub mod blackbody;
+pub mod color;
+pub mod grid;
+pub mod ior;
+pub mod smits;
+pub mod spectrum;
+pub mod tables;
+
+pub use grid::{BinGrid, GridError, MAX_BINS, Transport, spd};
+pub use ior::IorModel;
+pub use spectrum::{Role, Spectrum};
+
+#[cfg(test)]
+mod tests;
