@@ -50,7 +50,7 @@ struct RenderArgs {
     #[arg(long)]
     seconds: Option<f64>,
     /// Image size WxH.
-    #[arg(long, default_value = "256x256", value_parser = parse_size)]
+    #[arg(long, default_value = "256x256", value_parser = parse_size, allow_hyphen_values = true)]
     size: (u32, u32),
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -189,10 +189,10 @@ fn render(args: RenderArgs) -> Result<()> {
     if !(args.exposure.is_finite() && args.exposure > 0.0) {
         bail!("--exposure {}: must be finite and > 0", args.exposure);
     }
-    if let Some(s) = args.seconds {
-        if !(s.is_finite() && s > 0.0) {
-            bail!("--seconds {s}: must be finite and > 0");
-        }
+    if let Some(s) = args.seconds
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--seconds {s}: must be finite and > 0");
     }
     if args.passes == Some(0) {
         bail!("--passes 0: at least one pass is needed");
@@ -242,10 +242,10 @@ fn render(args: RenderArgs) -> Result<()> {
             .map_err(|_| anyhow::anyhow!("render cancelled"))?;
         bar.inc(1);
         bar.set_message(format!("{:.2} s/pass", session.stats().last_pass_seconds));
-        if let Some(s) = args.seconds {
-            if render_start.elapsed().as_secs_f64() >= s {
-                break;
-            }
+        if let Some(s) = args.seconds
+            && render_start.elapsed().as_secs_f64() >= s
+        {
+            break;
         }
     }
     bar.finish_and_clear();

@@ -176,10 +176,10 @@ mod tests {
                 let p = o + Vec3::new(u * scale, v * scale, 0.0);
                 let dir = Vec3::new(0.3, -0.2, 1.0).normalize();
                 let q = accel.offset(p, Vec3::Z, dir);
-                if let Some(h) = accel.intersect(q, dir, f32::INFINITY) {
-                    if h.t < 1e-3 * scale {
-                        fails += 1;
-                    }
+                if let Some(h) = accel.intersect(q, dir, f32::INFINITY)
+                    && h.t < 1e-3 * scale
+                {
+                    fails += 1;
                 }
                 // A receiver just above is not falsely occluded.
                 let q2 = accel.offset(p, Vec3::Z, Vec3::Z);

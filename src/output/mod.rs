@@ -158,6 +158,60 @@ pub fn psnr(a: &Image, b: &Image, exposure: f32) -> f64 {
     }
 }
 
+/// The stats JSON of a finished render (schema in the README).
+pub fn stats_json(
+    session: &crate::render::RenderSession,
+    image: &Image,
+    total_seconds: f64,
+) -> serde_json::Value {
+    let st = session.stats();
+    let mem = session.memory();
+    let s = session.settings();
+    let nonfinite = image
+        .pixels
+        .iter()
+        .filter(|p| p.iter().any(|v| !v.is_finite()))
+        .count();
+    serde_json::json!({
+        "scene": session.scene().name,
+        "bins": session.scene().bins(),
+        "storage": s.storage.name(),
+        "size": [s.width, s.height],
+        "passes": st.passes,
+        "seed": s.seed,
+        "photons_per_pass": s.photons_per_pass,
+        "final_gather_rays": s.final_gather_rays,
+        "photons": {
+            "emitted": st.photons_emitted,
+            "stored_global": st.stored_global,
+            "stored_caustic": st.stored_caustic,
+            "spike_records": st.spike_records,
+            "stored_global_total": st.stored_global_total,
+            "stored_caustic_total": st.stored_caustic_total,
+            "spike_records_total": st.spike_records_total,
+            "dispersion_splits": st.dispersion_splits,
+        },
+        "memory_bytes": {
+            "global_map": mem.global_map,
+            "caustic_map": mem.caustic_map,
+            "photon_maps": mem.photon_maps,
+            "film": mem.film,
+            "bvh": mem.bvh,
+        },
+        "bytes_per_photon": session.bytes_per_photon(),
+        "radius": {"global": st.r_global, "caustic": st.r_caustic},
+        "seconds": {
+            "photon_pass": st.photon_seconds,
+            "gather_pass": st.gather_seconds,
+            "total": total_seconds,
+        },
+        "nonfinite_pixels": nonfinite,
+        "dropped_samples": session.film().dropped_samples(),
+        "skipped": session.skipped(),
+        "warnings": session.scene().warnings,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -212,58 +266,4 @@ mod tests {
         };
         assert!((psnr(&a, &b, 1.0) - 20.0).abs() < 1e-3);
     }
-}
-
-/// The stats JSON of a finished render (schema in the README).
-pub fn stats_json(
-    session: &crate::render::RenderSession,
-    image: &Image,
-    total_seconds: f64,
-) -> serde_json::Value {
-    let st = session.stats();
-    let mem = session.memory();
-    let s = session.settings();
-    let nonfinite = image
-        .pixels
-        .iter()
-        .filter(|p| p.iter().any(|v| !v.is_finite()))
-        .count();
-    serde_json::json!({
-        "scene": session.scene().name,
-        "bins": session.scene().bins(),
-        "storage": s.storage.name(),
-        "size": [s.width, s.height],
-        "passes": st.passes,
-        "seed": s.seed,
-        "photons_per_pass": s.photons_per_pass,
-        "final_gather_rays": s.final_gather_rays,
-        "photons": {
-            "emitted": st.photons_emitted,
-            "stored_global": st.stored_global,
-            "stored_caustic": st.stored_caustic,
-            "spike_records": st.spike_records,
-            "stored_global_total": st.stored_global_total,
-            "stored_caustic_total": st.stored_caustic_total,
-            "spike_records_total": st.spike_records_total,
-            "dispersion_splits": st.dispersion_splits,
-        },
-        "memory_bytes": {
-            "global_map": mem.global_map,
-            "caustic_map": mem.caustic_map,
-            "photon_maps": mem.photon_maps,
-            "film": mem.film,
-            "bvh": mem.bvh,
-        },
-        "bytes_per_photon": session.bytes_per_photon(),
-        "radius": {"global": st.r_global, "caustic": st.r_caustic},
-        "seconds": {
-            "photon_pass": st.photon_seconds,
-            "gather_pass": st.gather_seconds,
-            "total": total_seconds,
-        },
-        "nonfinite_pixels": nonfinite,
-        "dropped_samples": session.film().dropped_samples(),
-        "skipped": session.skipped(),
-        "warnings": session.scene().warnings,
-    })
 }

@@ -122,9 +122,19 @@ pub fn kth_nearest_distance(positions: &[[f32; 3]], axes: &[u8], p: Vec3, k: usi
     heap.peek().map(|d| d.0.sqrt()).unwrap_or(0.0)
 }
 
-#[derive(PartialEq, PartialOrd)]
+/// An f32 with a total order, for the k-nearest heap.
 struct OrdF32(f32);
+impl PartialEq for OrdF32 {
+    fn eq(&self, o: &Self) -> bool {
+        self.cmp(o).is_eq()
+    }
+}
 impl Eq for OrdF32 {}
+impl PartialOrd for OrdF32 {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
 impl Ord for OrdF32 {
     fn cmp(&self, o: &Self) -> std::cmp::Ordering {
         self.0.total_cmp(&o.0)

@@ -101,12 +101,8 @@ mod tests {
         }
         f.passes = 100_000_000;
         let img = f.develop();
-        for c in 0..3 {
-            assert!(
-                ((img.pixels[0][c] - v[c]) / v[c]).abs() < 1e-6,
-                "{:?}",
-                img.pixels[0]
-            );
+        for (got, want) in img.pixels[0].iter().zip(v) {
+            assert!(((got - want) / want).abs() < 1e-6, "{:?}", img.pixels[0]);
         }
     }
 

@@ -58,10 +58,8 @@ impl Gather<'_> {
     /// Radiance (N bins) arriving at the camera through pixel (px, py), one jittered sample.
     pub fn pixel(
         &self,
-        px: u32,
-        py: u32,
-        width: u32,
-        height: u32,
+        (px, py): (u32, u32),
+        (width, height): (u32, u32),
         rng: &mut Rng,
         s: &mut Scratch,
         out: &mut [f32],

@@ -175,10 +175,10 @@ impl RenderSession {
                     .unwrap_or_else(fallback),
             );
         }
-        if self.r1_caustic.is_none() {
-            if let Some(c) = &maps.caustic {
-                self.r1_caustic = c.typical_knn_radius(self.settings.caustic_k, 256);
-            }
+        if self.r1_caustic.is_none()
+            && let Some(c) = &maps.caustic
+        {
+            self.r1_caustic = c.typical_knn_radius(self.settings.caustic_k, 256);
         }
         let diag = scene.diagonal().max(1e-6);
         let r_min = 1e-6 * diag;
@@ -211,7 +211,7 @@ impl RenderSession {
                             .map(|x| {
                                 let index = (y as u64) * w as u64 + x as u64;
                                 let mut rng = Rng::stream(seed, pass, index, Purpose::Camera);
-                                gather.pixel(x, y, w, h, &mut rng, scratch, radiance);
+                                gather.pixel((x, y), (w, h), &mut rng, scratch, radiance);
                                 scene.grid.to_linear_srgb(radiance)
                             })
                             .collect(),

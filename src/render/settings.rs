@@ -139,10 +139,10 @@ impl RenderSettings {
             ("global_radius", self.global_radius),
             ("caustic_radius", self.caustic_radius),
         ] {
-            if let Some(r) = r {
-                if !(r.is_finite() && r > 0.0) {
-                    return Err(out_of_range(field, r, "must be finite and > 0"));
-                }
+            if let Some(r) = r
+                && !(r.is_finite() && r > 0.0)
+            {
+                return Err(out_of_range(field, r, "must be finite and > 0"));
             }
         }
         for (field, k) in [("global_k", self.global_k), ("caustic_k", self.caustic_k)] {

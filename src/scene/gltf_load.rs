@@ -133,8 +133,10 @@ fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
     let mut camera = None;
     let mut degenerate = 0usize;
 
+    // Depth-first in document order (children pushed in reverse so they pop in order).
     let mut stack: Vec<(gltf::Node, Mat4, usize)> =
         root.nodes().map(|n| (n, Mat4::IDENTITY, 0)).collect();
+    stack.reverse();
     while let Some((node, parent, depth)) = stack.pop() {
         let element = format!("nodes[{}]", node.index());
         if depth > MAX_NODE_DEPTH {
@@ -182,7 +184,7 @@ fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
                     Some(ix) => ix.into_u32().collect(),
                     None => (0..positions.len() as u32).collect(),
                 };
-                if indices.len() % 3 != 0 {
+                if !indices.len().is_multiple_of(3) {
                     return Err(ctx.err(
                         &pel,
                         format!("{} indices is not a multiple of 3", indices.len()),
@@ -214,7 +216,8 @@ fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
         if let (Some(cam), None) = (node.camera(), &camera) {
             camera = Some(read_camera(&cam, &world, ctx, &mut out.warnings)?);
         }
-        for child in node.children() {
+        let children: Vec<_> = node.children().collect();
+        for child in children.into_iter().rev() {
             stack.push((child, world, depth + 1));
         }
     }
@@ -318,7 +321,8 @@ fn emission_spectrum(
     if set.iter().filter(|&&b| b).count() != 1 {
         return Err(ctx.err(el, "give exactly one of blackbody_k, illuminant, spd_csv"));
     }
-    let luminance = Spectrum::rgb_luminance(rgb);
+    // The luminance of the emitter the RGB colour alone would give.
+    let luminance = Spectrum::Illuminant(rgb).luminance();
     let normalise = |shape: Spectrum, what: &str| -> Result<Spectrum, SceneError> {
         let y = shape.luminance();
         if !(y.is_finite() && y > 0.0) {

@@ -10,7 +10,7 @@ const C2_NM_K: f64 = 1.438_776_877e7;
 /// underflows gracefully to 0 instead of overflowing `exp(x)` (an f32 `exp` overflows near
 /// x = 88.7, reached at 360 nm below 450 K). Returns 0 for non-positive or non-finite input.
 pub fn planck_relative(lambda_nm: f64, kelvin: f64) -> f64 {
-    if !(kelvin > 0.0 && lambda_nm > 0.0) || !kelvin.is_finite() || !lambda_nm.is_finite() {
+    if !(kelvin > 0.0 && lambda_nm > 0.0 && kelvin.is_finite() && lambda_nm.is_finite()) {
         return 0.0;
     }
     let x = C2_NM_K / (lambda_nm * kelvin);

@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use super::blackbody::planck_relative;
-use super::color::{luminance, xyz_to_linear_srgb};
+use super::color::xyz_to_linear_srgb;
 use super::tables::{CMF_RANGE, PiecewiseLinear, cmf, d65, smits_basis};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -209,10 +209,5 @@ impl Spectrum {
             Self::Scaled(k, s) => *k == 0.0 || s.is_black(),
             Self::Table(t) => t.ys().iter().all(|&v| v == 0.0),
         }
-    }
-
-    /// Luminance of an RGB colour, to give spectral emitters "the same luminance".
-    pub fn rgb_luminance(rgb: [f64; 3]) -> f64 {
-        luminance(rgb)
     }
 }

@@ -1,0 +1,221 @@
+//! Issue #2's acceptance checks, run on the shipped scenes.
+
+use prismap::output::psnr;
+use prismap::photon::Storage;
+use prismap::render::{RenderSession, RenderSettings};
+use prismap::scene;
+
+fn settings(bins: usize, storage: Storage) -> RenderSettings {
+    RenderSettings {
+        bins,
+        storage,
+        width: 64,
+        height: 64,
+        photons_per_pass: 40_000,
+        final_gather_rays: 4,
+        seed: 7,
+        ..RenderSettings::default()
+    }
+}
+
+fn render(scene: &scene::Scene, s: RenderSettings, passes: usize) -> RenderSession {
+    let mut session = RenderSession::new(scene, s).unwrap();
+    for _ in 0..passes {
+        session.run_pass().unwrap();
+    }
+    session
+}
+
+#[test]
+fn cornell_compact_storage_is_flat_in_bins_and_full_grows() {
+    let scene = scene::load_builtin("cornell-box").unwrap();
+    let bpp = |bins, storage| render(&scene, settings(bins, storage), 1).bytes_per_photon();
+    let (c4, c100) = (bpp(4, Storage::Compact), bpp(100, Storage::Compact));
+    let (f4, f100) = (bpp(4, Storage::Full), bpp(100, Storage::Full));
+    println!("bytes/photon: compact 4 → {c4}, 100 → {c100}; full 4 → {f4}, 100 → {f100}");
+    assert!(
+        (c100 - c4).abs() <= 0.1 * c4,
+        "compact grows: {c4} → {c100}"
+    );
+    assert!(f100 >= 10.0 * f4, "full: {f4} → {f100}");
+}
+
+#[test]
+fn cornell_compact_matches_full_to_40_db_and_builds_no_caustic_map() {
+    let scene = scene::load_builtin("cornell-box").unwrap();
+    for bins in [4, 20] {
+        let full = render(&scene, settings(bins, Storage::Full), 2);
+        let compact = render(&scene, settings(bins, Storage::Compact), 2);
+        let db = psnr(&full.image(), &compact.image(), 1.0);
+        println!("cornell-box {bins} bins: compact vs full PSNR {db:.2} dB");
+        assert!(db >= 40.0, "{bins} bins: {db} dB");
+        assert_eq!(compact.memory().caustic_map, 0);
+        assert_eq!(compact.stats().stored_caustic, 0);
+        assert!(
+            compact
+                .skipped()
+                .iter()
+                .any(|s| s.starts_with("caustic map"))
+        );
+    }
+}
+
+#[test]
+fn prism_stores_spikes_and_compact_caustics_equal_full_bit_for_bit() {
+    use prismap::photon::{PhotonSettings, trace_photons};
+    use prismap::scene::SpectralScene;
+    use std::sync::atomic::AtomicBool;
+    let scene = scene::load_builtin("prism").unwrap();
+    for bins in [20, 100] {
+        let spectral =
+            SpectralScene::new(&scene, prismap::spectral::BinGrid::with_bins(bins).unwrap());
+        assert!(spectral.has_dispersion && spectral.has_specular);
+        let pass = |storage| {
+            let ps = PhotonSettings {
+                photons: 20_000,
+                storage,
+                max_depth: 32,
+                dispersion_split: 4,
+                caustic_map: true,
+            };
+            trace_photons(&spectral, &ps, 3, 1, &AtomicBool::new(false)).unwrap()
+        };
+        let full = pass(Storage::Full);
+        let compact = pass(Storage::Compact);
+        let (fc, cc) = (full.caustic.unwrap(), compact.caustic.unwrap());
+        assert!(cc.len() > 1000, "caustic photons: {}", cc.len());
+        assert_eq!(fc.len(), cc.len());
+        assert_eq!(
+            cc.spike_records(),
+            cc.len(),
+            "every caustic photon is single-wavelength"
+        );
+        let (mut a, mut b) = (vec![0.0f32; bins], vec![0.0f32; bins]);
+        for i in 0..cc.len() {
+            assert_eq!(fc.positions()[i], cc.positions()[i]);
+            fc.flux_of(&spectral.grid, i, &mut a);
+            cc.flux_of(&spectral.grid, i, &mut b);
+            assert!(
+                a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "photon {i}: {a:?} vs {b:?}"
+            );
+        }
+    }
+}
+
+/// The brightest 7×7 neighbourhood (the rainbow is the brightest extended feature; a
+/// blur keeps single-pixel fireflies on the glass from winning).
+fn brightest_region(img: &prismap::render::Image) -> (u32, u32) {
+    let lum = |x: u32, y: u32| {
+        let p = img.get(x, y);
+        p[0] + p[1] + p[2]
+    };
+    let mut best = (0.0f32, 0, 0);
+    for y in 3..img.height - 3 {
+        for x in 3..img.width - 3 {
+            let mut s = 0.0;
+            for dy in 0..7 {
+                for dx in 0..7 {
+                    s += lum(x + dx - 3, y + dy - 3);
+                }
+            }
+            if s > best.0 {
+                best = (s, x, y);
+            }
+        }
+    }
+    (best.1, best.2)
+}
+
+/// Centroid (x, y) of pixels within `r` of `c` whose colour passes `pick`.
+fn centroid(
+    img: &prismap::render::Image,
+    c: (u32, u32),
+    r: u32,
+    pick: impl Fn([f32; 3]) -> bool,
+) -> Option<(f64, f64, usize)> {
+    let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
+    for y in c.1.saturating_sub(r)..(c.1 + r).min(img.height) {
+        for x in c.0.saturating_sub(r)..(c.0 + r).min(img.width) {
+            if pick(img.get(x, y)) {
+                sx += x as f64;
+                sy += y as f64;
+                n += 1;
+            }
+        }
+    }
+    (n > 0).then(|| (sx / n as f64, sy / n as f64, n))
+}
+
+#[test]
+fn prism_rainbow_runs_from_red_to_violet_in_the_image() {
+    let scene = scene::load_builtin("prism").unwrap();
+    let s = RenderSettings {
+        bins: 60,
+        storage: Storage::Compact,
+        width: 160,
+        height: 160,
+        photons_per_pass: 60_000,
+        final_gather_rays: 2,
+        ..RenderSettings::default()
+    };
+    let img = render(&scene, s, 3).image();
+    let c = brightest_region(&img);
+    let r = img.width / 6;
+    let bright = |p: [f32; 3]| p[0] + p[1] + p[2] > 0.3;
+    let red = centroid(&img, c, r, |p| {
+        bright(p) && p[0] > 2.0 * p[1] && p[0] > 2.0 * p[2]
+    })
+    .expect("red pixels");
+    let green = centroid(&img, c, r, |p| {
+        bright(p) && p[1] > 1.3 * p[0] && p[1] > 1.3 * p[2]
+    })
+    .expect("green pixels");
+    let violet = centroid(&img, c, r, |p| {
+        bright(p) && p[2] > 1.5 * p[1] && p[2] > 0.5 * p[0] && p[0] > 0.15 * p[2]
+    })
+    .expect("violet pixels");
+    println!("red {red:?} green {green:?} violet {violet:?}");
+    // Green lies between red and violet along the band, and the ends are apart.
+    let (dx, dy) = (violet.0 - red.0, violet.1 - red.1);
+    let len2 = dx * dx + dy * dy;
+    assert!(len2.sqrt() > 5.0, "colours are not separated");
+    let t = ((green.0 - red.0) * dx + (green.1 - red.1) * dy) / len2;
+    assert!(
+        t > 0.15 && t < 0.85,
+        "green is not between red and violet: t = {t}"
+    );
+}
+
+#[test]
+fn same_seed_gives_the_same_image_on_one_and_two_threads() {
+    let scene = scene::load_builtin("prism").unwrap();
+    let run = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let s = RenderSettings {
+                width: 48,
+                height: 40,
+                photons_per_pass: 15_000,
+                ..settings(16, Storage::Compact)
+            };
+            render(&scene, s, 2).image()
+        })
+    };
+    let (a, b, c) = (run(1), run(2), run(3));
+    assert!(
+        a.pixels
+            .iter()
+            .zip(&b.pixels)
+            .all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits))
+    );
+    assert!(
+        a.pixels
+            .iter()
+            .zip(&c.pixels)
+            .all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits))
+    );
+}

@@ -1,0 +1,185 @@
+//! The `prismap` binary: renders, writes stats, and refuses bad arguments with a clear
+//! message, a non-zero status and no partial file.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn prismap() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_prismap"))
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("prismap-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn render_writes_png_exr_and_stats() {
+    let dir = temp_dir("ok");
+    let png = dir.join("cb.png");
+    let stats = dir.join("cb.json");
+    let out = prismap()
+        .args([
+            "render",
+            "cornell-box",
+            "--bins",
+            "8",
+            "--storage",
+            "full",
+            "--photons",
+            "5000",
+            "--passes",
+            "2",
+        ])
+        .args(["--size", "32x24", "--fg", "2", "--threads", "2", "-o"])
+        .arg(&png)
+        .arg("--stats")
+        .arg(&stats)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (32, 24));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    for key in [
+        "scene",
+        "bins",
+        "storage",
+        "size",
+        "passes",
+        "seed",
+        "photons",
+        "memory_bytes",
+        "bytes_per_photon",
+        "seconds",
+        "nonfinite_pixels",
+        "skipped",
+    ] {
+        assert!(s.get(key).is_some(), "stats lack {key}: {s}");
+    }
+    for key in [
+        "emitted",
+        "stored_global",
+        "stored_caustic",
+        "spike_records",
+    ] {
+        assert!(s["photons"].get(key).is_some(), "{key}");
+    }
+    for key in ["global_map", "caustic_map", "photon_maps", "film", "bvh"] {
+        assert!(s["memory_bytes"][key].as_u64().is_some(), "{key}");
+    }
+    assert_eq!(s["scene"], "cornell-box");
+    assert_eq!(s["storage"], "full");
+    assert_eq!(s["bins"], 8);
+    assert_eq!(s["passes"], 2);
+    assert_eq!(s["photons"]["emitted"], 10_000);
+    assert_eq!(s["bytes_per_photon"], 16.0 + 4.0 * 8.0 + 1.0);
+    assert_eq!(s["nonfinite_pixels"], 0);
+    let exr = dir.join("cb.exr");
+    let out = prismap()
+        .args([
+            "render",
+            "prism",
+            "--photons",
+            "3000",
+            "--passes",
+            "1",
+            "--size",
+            "16x16",
+            "-o",
+        ])
+        .arg(&exr)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(prismap::output::read_exr(&exr).unwrap().width, 16);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn same_command_gives_a_bit_identical_exr_on_1_and_2_threads() {
+    let dir = temp_dir("det");
+    let run = |threads: &str, name: &str| {
+        let p = dir.join(name);
+        let out = prismap()
+            .args([
+                "render",
+                "prism",
+                "--photons",
+                "8000",
+                "--passes",
+                "2",
+                "--size",
+                "40x30",
+                "--threads",
+                threads,
+                "-o",
+            ])
+            .arg(&p)
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        std::fs::read(&p).unwrap()
+    };
+    assert_eq!(run("1", "a.exr"), run("2", "b.exr"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Runs prismap expecting failure; returns stderr.
+fn fails(args: &[&str]) -> String {
+    let out = prismap().args(args).output().unwrap();
+    assert!(!out.status.success(), "{args:?} should fail");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn bad_arguments_fail_clearly_and_leave_no_file() {
+    let dir = temp_dir("bad");
+    let png = dir.join("x.png");
+    let p = png.to_str().unwrap();
+    let e = fails(&["render", "cornell-box", "--bins", "0", "-o", p]);
+    assert!(e.contains("bins") && e.contains('0'), "{e}");
+    let e = fails(&["render", "cornell-box", "--bins", "1000000", "-o", p]);
+    assert!(e.contains("1000000"), "{e}");
+    let e = fails(&["render", "cornell-box", "--size", "-5x3", "-o", p]);
+    assert!(e.contains("size"), "{e}");
+    let e = fails(&["render", "cornell-box", "--size", "0x3", "-o", p]);
+    assert!(e.contains("width"), "{e}");
+    let e = fails(&["render", "cornell-box", "--storage", "zip", "-o", p]);
+    assert!(e.contains("zip"), "{e}");
+    let e = fails(&["render", "no-such-scene.gltf", "-o", p]);
+    assert!(e.contains("no-such-scene.gltf"), "{e}");
+    let e = fails(&["render", "cornell-box", "--threads", "0", "-o", p]);
+    assert!(e.contains("threads"), "{e}");
+    let e = fails(&[
+        "render",
+        "cornell-box",
+        "-o",
+        dir.join("missing/x.png").to_str().unwrap(),
+    ]);
+    assert!(e.contains("does not exist"), "{e}");
+    let e = fails(&[
+        "render",
+        "cornell-box",
+        "-o",
+        dir.join("x.bmp").to_str().unwrap(),
+    ]);
+    assert!(e.contains(".png"), "{e}");
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        0,
+        "no partial files"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
