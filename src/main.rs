@@ -23,6 +23,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Open the interactive viewer (the default when a display is available).
+    View(ViewArgs),
     /// Render a scene headless to PNG or EXR.
     Render(RenderArgs),
     /// List the built-in scenes and glasses.
@@ -80,6 +82,58 @@ struct RenderArgs {
     stats: Option<PathBuf>,
 }
 
+#[derive(clap::Args)]
+struct ViewArgs {
+    /// A .gltf/.glb file, or a built-in scene name.
+    #[arg(default_value = scene::DEFAULT_SCENE)]
+    scene: String,
+    #[arg(long, default_value_t = RenderSettings::default().bins)]
+    bins: usize,
+    #[arg(long, default_value = "compact", value_parser = parse_storage)]
+    storage: Storage,
+    #[arg(long, default_value_t = 50_000)]
+    photons: usize,
+    #[arg(long, default_value = "256x256", value_parser = parse_size, allow_hyphen_values = true)]
+    size: (u32, u32),
+    /// Save a screenshot of the whole window here after --after-passes passes, then exit.
+    #[arg(long)]
+    screenshot: Option<PathBuf>,
+    #[arg(long, default_value_t = 8)]
+    after_passes: u64,
+}
+
+fn view(args: ViewArgs) -> Result<()> {
+    if let Some(p) = &args.screenshot {
+        check_writable(p, &["png"])?;
+    }
+    if args.after_passes == 0 {
+        bail!("--after-passes 0: at least one pass is needed");
+    }
+    let settings = RenderSettings {
+        bins: args.bins,
+        storage: args.storage,
+        photons_per_pass: args.photons,
+        width: args.size.0,
+        height: args.size.1,
+        ..RenderSettings::default()
+    };
+    settings.validate().context("invalid settings")?;
+    let source = if Path::new(&args.scene).exists()
+        || !scene::BUILTIN.iter().any(|(n, _)| *n == args.scene)
+    {
+        // Fail early with the loader's message rather than inside the window.
+        scene::load(Path::new(&args.scene))?;
+        prismap::app::SceneSource::File(PathBuf::from(&args.scene))
+    } else {
+        prismap::app::SceneSource::Builtin(args.scene.clone())
+    };
+    let capture = args.screenshot.map(|path| prismap::app::Capture {
+        path,
+        after_passes: args.after_passes,
+    });
+    prismap::app::run_native(source, settings, capture).map_err(|e| anyhow::anyhow!(e))
+}
+
 fn parse_storage(s: &str) -> Result<Storage, String> {
     s.parse()
 }
@@ -99,14 +153,21 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
+        Some(Command::View(args)) => view(args),
         Some(Command::Render(args)) => render(args),
         Some(Command::List) => {
             list();
             Ok(())
         }
+        None if prismap::app::display_available() => {
+            match Cli::parse_from(["prismap", "view"]).command {
+                Some(Command::View(args)) => view(args),
+                _ => unreachable!("`prismap view` parses as the view command"),
+            }
+        }
         None => {
             eprintln!(
-                "prismap: rendering the built-in '{}' scene headless (see `prismap --help`).",
+                "prismap: no display, so rendering the built-in '{}' scene headless instead of opening the viewer (see `prismap --help`).",
                 scene::DEFAULT_SCENE
             );
             match Cli::parse_from(["prismap", "render"]).command {

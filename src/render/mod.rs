@@ -6,5 +6,5 @@ pub mod session;
 pub mod settings;
 
 pub use film::{Film, Image};
-pub use session::{MemoryReport, RenderSession, RenderStats};
+pub use session::{MemoryReport, Probe, RenderSession, RenderStats};
 pub use settings::{RenderSettings, SettingsError};

@@ -64,6 +64,31 @@ pub struct RenderSession {
     radius_sq_factor: f64,
     memory: MemoryReport,
     cancel: Arc<AtomicBool>,
+    /// Pixels whose spectra are kept (the probe): the only spectral film memory.
+    probes: Vec<Probe>,
+}
+
+/// The accumulated spectrum of one probed pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Probe {
+    pub x: u32,
+    pub y: u32,
+    /// Sum over passes of the pixel's radiance per bin.
+    pub sum: Vec<f64>,
+    /// Passes summed.
+    pub passes: u64,
+}
+
+impl Probe {
+    /// Mean radiance per bin.
+    pub fn mean(&self) -> Vec<f32> {
+        let k = if self.passes > 0 {
+            1.0 / self.passes as f64
+        } else {
+            0.0
+        };
+        self.sum.iter().map(|v| (v * k) as f32).collect()
+    }
 }
 
 impl RenderSession {
@@ -93,7 +118,40 @@ impl RenderSession {
             radius_sq_factor: 1.0,
             memory,
             cancel: Arc::new(AtomicBool::new(false)),
+            probes: Vec::new(),
         }
+    }
+
+    /// Keeps the spectrum of these pixels from the next pass on (others are dropped;
+    /// a pixel already probed keeps its sums).
+    pub fn set_probes(&mut self, pixels: &[(u32, u32)]) {
+        let n = self.scene.bins();
+        let (w, h) = (self.settings.width, self.settings.height);
+        let old = std::mem::take(&mut self.probes);
+        self.probes = pixels
+            .iter()
+            .filter(|(x, y)| *x < w && *y < h)
+            .map(|&(x, y)| {
+                old.iter()
+                    .find(|p| (p.x, p.y) == (x, y))
+                    .cloned()
+                    .unwrap_or(Probe {
+                        x,
+                        y,
+                        sum: vec![0.0; n],
+                        passes: 0,
+                    })
+            })
+            .collect();
+        self.memory.film = self.film.memory_bytes() + self.probe_bytes();
+    }
+
+    pub fn probes(&self) -> &[Probe] {
+        &self.probes
+    }
+
+    fn probe_bytes(&self) -> usize {
+        self.probes.iter().map(|p| p.sum.len() * 8).sum()
     }
 
     pub fn scene(&self) -> &Arc<SpectralScene> {
@@ -142,7 +200,9 @@ impl RenderSession {
         if self.settings.final_gather_rays == 0 {
             s.push("final gathering: global map shown directly".to_string());
         }
-        s.push("spectral film: nothing reads per-pixel spectra in this run".to_string());
+        if self.probes.is_empty() {
+            s.push("spectral film: nothing reads per-pixel spectra in this run".to_string());
+        }
         s
     }
 
@@ -198,7 +258,9 @@ impl RenderSession {
         let (w, h) = (self.settings.width, self.settings.height);
         let n = scene.bins();
         let cancel = &self.cancel;
-        let rows: Vec<Option<Vec<[f32; 3]>>> = (0..h)
+        let probes = &self.probes;
+        type Row = (Vec<[f32; 3]>, Vec<(usize, Vec<f32>)>);
+        let rows: Vec<Option<Row>> = (0..h)
             .into_par_iter()
             .map_init(
                 || (Scratch::new(n), vec![0.0f32; n]),
@@ -206,24 +268,40 @@ impl RenderSession {
                     if cancel.load(Ordering::Relaxed) {
                         return None;
                     }
-                    Some(
-                        (0..w)
-                            .map(|x| {
-                                let index = (y as u64) * w as u64 + x as u64;
-                                let mut rng = Rng::stream(seed, pass, index, Purpose::Camera);
-                                gather.pixel((x, y), (w, h), &mut rng, scratch, radiance);
-                                scene.grid.to_linear_srgb(radiance)
-                            })
-                            .collect(),
-                    )
+                    let mut spectra = Vec::new();
+                    let row = (0..w)
+                        .map(|x| {
+                            let index = (y as u64) * w as u64 + x as u64;
+                            let mut rng = Rng::stream(seed, pass, index, Purpose::Camera);
+                            gather.pixel((x, y), (w, h), &mut rng, scratch, radiance);
+                            if let Some(k) = probes.iter().position(|p| (p.x, p.y) == (x, y)) {
+                                spectra.push((k, radiance.clone()));
+                            }
+                            scene.grid.to_linear_srgb(radiance)
+                        })
+                        .collect();
+                    Some((row, spectra))
                 },
             )
             .collect();
         let mut image = Vec::with_capacity((w * h) as usize);
+        let mut probe_spectra = Vec::new();
         for r in rows {
-            image.extend(r.ok_or(Cancelled)?);
+            let (row, spectra) = r.ok_or(Cancelled)?;
+            image.extend(row);
+            probe_spectra.extend(spectra);
         }
         self.film.add_pass(&image);
+        for (k, spectrum) in probe_spectra {
+            // Same rule as the film: a non-finite sample is dropped.
+            let p = &mut self.probes[k];
+            if spectrum.iter().all(|v| v.is_finite()) {
+                for (s, v) in p.sum.iter_mut().zip(&spectrum) {
+                    *s += *v as f64;
+                }
+            }
+            p.passes += 1;
+        }
 
         // Bookkeeping.
         let end = Instant::now();

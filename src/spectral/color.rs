@@ -106,3 +106,69 @@ mod tests {
         assert!((srgb_encode(7.0) - 1.0).abs() < 1e-6);
     }
 }
+
+/// CIE xy chromaticity of D65.
+pub const D65_XY: [f64; 2] = [0.3127, 0.3290];
+
+/// Dominant wavelength (nm) of a colour seen against D65: the spectral colour on the line
+/// from the white point through the colour. Colours in the purple region get the
+/// complementary wavelength, returned negative (CIE convention). `None` for black or
+/// for a colour at the white point.
+pub fn dominant_wavelength(xyz: [f64; 3]) -> Option<f64> {
+    let sum = xyz[0] + xyz[1] + xyz[2];
+    if !(sum > 0.0 && sum.is_finite()) {
+        return None;
+    }
+    let (x, y) = (xyz[0] / sum, xyz[1] / sum);
+    let (dx, dy) = (x - D65_XY[0], y - D65_XY[1]);
+    if dx.hypot(dy) < 1e-4 {
+        return None;
+    }
+    let theta = dy.atan2(dx);
+    let c = super::tables::cmf();
+    let best = |target: f64| -> (f64, f64) {
+        let mut best = (f64::INFINITY, 0.0);
+        for l in 380..=700 {
+            let l = l as f64;
+            let (lx, ly, lz) = (c.x.eval(l), c.y.eval(l), c.z.eval(l));
+            let s = lx + ly + lz;
+            let a = (ly / s - D65_XY[1]).atan2(lx / s - D65_XY[0]);
+            let d = (a - target + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
+                - std::f64::consts::PI;
+            if d.abs() < best.0 {
+                best = (d.abs(), l);
+            }
+        }
+        best
+    };
+    let (d, l) = best(theta);
+    if d < 1f64.to_radians() {
+        Some(l)
+    } else {
+        let (_, l) = best(theta + std::f64::consts::PI);
+        Some(-l)
+    }
+}
+
+#[cfg(test)]
+mod dominant_tests {
+    use super::*;
+
+    #[test]
+    fn dominant_wavelength_of_spectral_colours_and_purples() {
+        let c = crate::spectral::tables::cmf();
+        for l in [450.0, 500.0, 550.0, 600.0, 650.0] {
+            let xyz = [c.x.eval(l), c.y.eval(l), c.z.eval(l)];
+            let d = dominant_wavelength(xyz).unwrap();
+            assert!((d - l).abs() <= 1.0, "{l}: {d}");
+        }
+        // Magenta (red + blue) has a complementary (negative) dominant wavelength.
+        let magenta = linear_srgb_to_xyz([1.0, 0.0, 1.0]);
+        assert!(dominant_wavelength(magenta).unwrap() < 0.0);
+        assert_eq!(dominant_wavelength([0.0; 3]), None);
+        assert_eq!(
+            dominant_wavelength(linear_srgb_to_xyz([1.0, 1.0, 1.0])),
+            None
+        );
+    }
+}

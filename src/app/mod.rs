@@ -1,0 +1,525 @@
+//! The interactive viewer (eframe/egui). The UI owns no rendering state: it sends
+//! commands to the [`worker::Worker`] and shows the newest snapshot it publishes.
+//!
+//! Split by concern: this file holds the state and the logic (commands, restarts,
+//! capture), `panels.rs` draws the controls, statistics, memory and probe panels,
+//! `orbit.rs` turns mouse drags into camera moves.
+
+mod orbit;
+mod panels;
+pub use panels::format_bytes;
+pub mod worker;
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use crate::photon::Storage;
+use crate::render::{Image, RenderSettings};
+use crate::scene::{self, MaterialKind, Scene};
+use crate::spectral::Spectrum;
+use orbit::Orbit;
+use worker::{Command, Snapshot, Worker};
+
+/// How linear radiance becomes display values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ToneMap {
+    /// Exposure, then clip at 1.
+    Clamp,
+    /// Exposure, then x / (1 + x) per channel.
+    Reinhard,
+}
+
+/// A request to save a screenshot of the window after some passes, then quit.
+#[derive(Clone, Debug)]
+pub struct Capture {
+    pub path: PathBuf,
+    pub after_passes: u64,
+}
+
+/// Where the scene came from, for the scene list.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SceneSource {
+    Builtin(String),
+    File(PathBuf),
+}
+
+impl SceneSource {
+    pub fn label(&self) -> String {
+        match self {
+            SceneSource::Builtin(n) => format!("{n} (built in)"),
+            SceneSource::File(p) => p.display().to_string(),
+        }
+    }
+
+    fn load(&self) -> Result<Scene, scene::SceneError> {
+        match self {
+            SceneSource::Builtin(n) => scene::load_builtin(n),
+            SceneSource::File(p) => scene::load(p),
+        }
+    }
+}
+
+/// Memory readings over time, for the history plot.
+#[derive(Clone, Copy, Debug)]
+pub struct MemorySample {
+    pub seconds: f64,
+    pub photon_maps: f64,
+    pub resident: f64,
+}
+
+pub struct ViewerApp {
+    worker: Worker,
+    source: SceneSource,
+    scene: Arc<Scene>,
+    orbit: Orbit,
+    pub settings: RenderSettings,
+    pub auto_bins: bool,
+    auto_reason: String,
+    pub exposure: f32,
+    pub tone: ToneMap,
+    pub paused: bool,
+    texture: Option<egui::TextureHandle>,
+    shown: Option<(u64, u64)>,
+    shown_tone: (f32, ToneMap),
+    pub snapshot: Option<Snapshot>,
+    /// The probed pixel and up to three pinned ones.
+    pub probe: Option<(u32, u32)>,
+    pub pinned: Vec<(u32, u32)>,
+    memory_history: VecDeque<MemorySample>,
+    pub status: String,
+    pub save_dir: PathBuf,
+    capture: Option<Capture>,
+    capture_done: Arc<AtomicBool>,
+    capture_requested: bool,
+    capture_error: Arc<Mutex<Option<String>>>,
+    scene_files: Vec<PathBuf>,
+    path_input: String,
+    started: Instant,
+    /// When the last setting changed, and how long until its first image arrived.
+    changed_at: Instant,
+    pub first_image_latency: Option<f64>,
+    pub last_restart_generation: u64,
+}
+
+impl ViewerApp {
+    /// A viewer on `source`, rendering with `settings`; `repaint` wakes the UI.
+    pub fn new(
+        ctx: &egui::Context,
+        source: SceneSource,
+        settings: RenderSettings,
+        capture: Option<Capture>,
+    ) -> Self {
+        let repaint_ctx = ctx.clone();
+        let worker = Worker::spawn(move || repaint_ctx.request_repaint());
+        let (scene, status) = match source.load() {
+            Ok(s) => (s, String::new()),
+            Err(e) => (
+                scene::load_builtin(scene::DEFAULT_SCENE).expect("the built-in scene loads"),
+                format!("{e}; showing the built-in scene"),
+            ),
+        };
+        let source = if status.is_empty() {
+            source
+        } else {
+            SceneSource::Builtin(scene::DEFAULT_SCENE.to_string())
+        };
+        let mut app = Self {
+            worker,
+            orbit: Orbit::new(&scene),
+            scene: Arc::new(scene),
+            source,
+            settings,
+            auto_bins: false,
+            auto_reason: String::new(),
+            exposure: 1.0,
+            tone: ToneMap::Clamp,
+            paused: false,
+            texture: None,
+            shown: None,
+            shown_tone: (1.0, ToneMap::Clamp),
+            snapshot: None,
+            probe: None,
+            pinned: Vec::new(),
+            memory_history: VecDeque::new(),
+            status,
+            save_dir: PathBuf::from("screenshots"),
+            capture_requested: false,
+            capture,
+            capture_done: Arc::new(AtomicBool::new(false)),
+            capture_error: Arc::new(Mutex::new(None)),
+            scene_files: list_scene_files(Path::new("scenes")),
+            path_input: String::new(),
+            started: Instant::now(),
+            changed_at: Instant::now(),
+            first_image_latency: None,
+            last_restart_generation: 0,
+        };
+        if let Some(c) = &app.capture {
+            app.worker.send(Command::StopAfter(Some(c.after_passes)));
+        }
+        app.restart();
+        app
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn source(&self) -> &SceneSource {
+        &self.source
+    }
+
+    /// Restarts rendering with the current scene, camera and settings.
+    pub fn restart(&mut self) {
+        if self.auto_bins {
+            let (bins, why) = auto_bins(&self.scene);
+            self.settings.bins = bins;
+            self.auto_reason = why;
+        }
+        let mut scene = (*self.scene).clone();
+        scene.camera = self.orbit.camera();
+        self.last_restart_generation = self.worker.start(Arc::new(scene), self.settings.clone());
+        self.send_probes();
+        self.changed_at = Instant::now();
+        self.first_image_latency = None;
+        self.snapshot = None;
+    }
+
+    fn send_probes(&self) {
+        let mut p: Vec<(u32, u32)> = self.pinned.clone();
+        if let Some(c) = self.probe
+            && !p.contains(&c)
+        {
+            p.push(c);
+        }
+        self.worker.send(Command::Probes(p));
+    }
+
+    /// Opens another scene; on failure keeps the current one and says why.
+    pub fn open(&mut self, source: SceneSource) {
+        match source.load() {
+            Ok(s) => {
+                self.orbit = Orbit::new(&s);
+                self.scene = Arc::new(s);
+                self.source = source;
+                self.probe = None;
+                self.pinned.clear();
+                self.status = format!("opened {}", self.source.label());
+                self.restart();
+            }
+            Err(e) => self.status = e.to_string(),
+        }
+    }
+
+    pub fn set_paused(&mut self, paused: bool) {
+        self.paused = paused;
+        self.worker.send(Command::Pause(paused));
+    }
+
+    /// Probes pixel (x, y): its spectrum is kept from now on.
+    pub fn set_probe(&mut self, pixel: (u32, u32)) {
+        self.probe = Some(pixel);
+        self.send_probes();
+    }
+
+    pub fn pin_probe(&mut self) {
+        if let Some(p) = self.probe
+            && !self.pinned.contains(&p)
+        {
+            if self.pinned.len() == 3 {
+                self.pinned.remove(0);
+            }
+            self.pinned.push(p);
+            self.send_probes();
+        }
+    }
+
+    pub fn unpin(&mut self, p: (u32, u32)) {
+        self.pinned.retain(|q| *q != p);
+        self.send_probes();
+    }
+
+    /// Error of the current render, if it failed.
+    pub fn render_error(&self) -> Option<String> {
+        self.worker.error()
+    }
+
+    /// Saves the current image as PNG (display values) or EXR (linear) in `save_dir`.
+    pub fn save(&mut self, ext: &str) -> Result<PathBuf, String> {
+        let snap = self.snapshot.as_ref().ok_or("nothing rendered yet")?;
+        std::fs::create_dir_all(&self.save_dir)
+            .map_err(|e| format!("{}: {e}", self.save_dir.display()))?;
+        let stem = match &self.source {
+            SceneSource::Builtin(n) => n.clone(),
+            SceneSource::File(p) => p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+        };
+        let name = format!(
+            "{stem}-{}-{}-{}p.{ext}",
+            if self.settings.storage == Storage::Rgb {
+                "rgb".to_string()
+            } else {
+                format!("{}bins", snap.bins)
+            },
+            self.settings.storage.name(),
+            snap.stats.passes
+        );
+        let path = self.save_dir.join(name);
+        let result = if ext == "png" {
+            let bytes = tone_map(&snap.image, self.exposure, self.tone);
+            crate::output::write_atomic(&path, |tmp| {
+                image::save_buffer_with_format(
+                    tmp,
+                    &bytes,
+                    snap.image.width,
+                    snap.image.height,
+                    image::ExtendedColorType::Rgb8,
+                    image::ImageFormat::Png,
+                )
+                .map_err(|e| e.to_string())
+            })
+        } else {
+            crate::output::write_exr(&path, &snap.image)
+        };
+        result.map_err(|e| e.to_string())?;
+        self.status = format!("saved {}", path.display());
+        Ok(path)
+    }
+
+    /// Pulls the newest snapshot and uploads it to the texture when it is new.
+    fn poll(&mut self, ctx: &egui::Context) {
+        if let Some(s) = self.worker.latest() {
+            let key = (s.generation, s.stats.passes);
+            if self.shown != Some(key) {
+                if self.first_image_latency.is_none() {
+                    self.first_image_latency = Some(self.changed_at.elapsed().as_secs_f64());
+                }
+                self.memory_history.push_back(MemorySample {
+                    seconds: self.started.elapsed().as_secs_f64(),
+                    photon_maps: s.memory.photon_maps as f64,
+                    resident: resident_memory_bytes().unwrap_or(0) as f64,
+                });
+                while self.memory_history.len() > 600 {
+                    self.memory_history.pop_front();
+                }
+                self.shown = Some(key);
+                self.snapshot = Some(s);
+                self.upload(ctx);
+            }
+        }
+        if self.shown_tone != (self.exposure, self.tone) && self.snapshot.is_some() {
+            self.upload(ctx);
+        }
+    }
+
+    fn upload(&mut self, ctx: &egui::Context) {
+        let Some(s) = &self.snapshot else { return };
+        let bytes = tone_map(&s.image, self.exposure, self.tone);
+        let img =
+            egui::ColorImage::from_rgb([s.image.width as usize, s.image.height as usize], &bytes);
+        match &mut self.texture {
+            Some(t) => t.set(img, egui::TextureOptions::NEAREST),
+            None => {
+                self.texture = Some(ctx.load_texture("render", img, egui::TextureOptions::NEAREST))
+            }
+        }
+        self.shown_tone = (self.exposure, self.tone);
+    }
+
+    /// The scripted capture: screenshot once enough passes are shown, then close.
+    fn drive_capture(&mut self, ctx: &egui::Context) {
+        let Some(c) = &self.capture else { return };
+        if self.capture_done.load(Ordering::SeqCst) {
+            if let Some(e) = self
+                .capture_error
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .take()
+            {
+                eprintln!("error: {e}");
+                std::process::exit(1);
+            }
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            return;
+        }
+        let passes = self.snapshot.as_ref().map_or(0, |s| s.stats.passes);
+        if !self.capture_requested && passes >= c.after_passes {
+            self.capture_requested = true;
+            let path = c.path.clone();
+            let done = self.capture_done.clone();
+            let err = self.capture_error.clone();
+            let ctx2 = ctx.clone();
+            ctx.request_screenshot(move |img| {
+                let [w, h] = img.size;
+                let rgba: Vec<u8> = img.pixels.iter().flat_map(|c| c.to_array()).collect();
+                let r = crate::output::write_atomic(&path, |tmp| {
+                    image::save_buffer_with_format(
+                        tmp,
+                        &rgba,
+                        w as u32,
+                        h as u32,
+                        image::ExtendedColorType::Rgba8,
+                        image::ImageFormat::Png,
+                    )
+                    .map_err(|e| e.to_string())
+                });
+                if let Err(e) = r {
+                    *err.lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(e.to_string());
+                }
+                done.store(true, Ordering::SeqCst);
+                ctx2.request_repaint();
+            });
+        }
+        ctx.request_repaint();
+    }
+
+    /// The whole UI for one frame.
+    pub fn ui(&mut self, ui: &mut egui::Ui) {
+        let ctx = ui.ctx().clone();
+        self.poll(&ctx);
+        // Scenes dropped on the window.
+        let dropped: Vec<PathBuf> = ctx.input(|i| {
+            i.raw
+                .dropped_files
+                .iter()
+                .map(|f| f.path().to_path_buf())
+                .collect()
+        });
+        if let Some(p) = dropped.into_iter().find(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb"))
+        }) {
+            self.open(SceneSource::File(p));
+        }
+        panels::controls(self, ui);
+        panels::statistics(self, ui);
+        panels::probe(self, ui);
+        panels::image(self, ui);
+        self.drive_capture(&ctx);
+    }
+
+    pub fn memory_history(&self) -> &VecDeque<MemorySample> {
+        &self.memory_history
+    }
+}
+
+impl eframe::App for ViewerApp {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        ViewerApp::ui(self, ui);
+    }
+}
+
+/// Display bytes (RGB8, sRGB-encoded) of a linear image.
+pub fn tone_map(image: &Image, exposure: f32, tone: ToneMap) -> Vec<u8> {
+    use crate::spectral::color::srgb_encode;
+    image
+        .pixels
+        .iter()
+        .flat_map(|p| {
+            p.map(|v| {
+                let v = v * exposure;
+                let v = match tone {
+                    ToneMap::Clamp => v,
+                    ToneMap::Reinhard => v.max(0.0) / (1.0 + v.max(0.0)),
+                };
+                (srgb_encode(v) * 255.0 + 0.5) as u8
+            })
+        })
+        .collect()
+}
+
+/// The bin count the viewer picks on "auto", and why.
+pub fn auto_bins(scene: &Scene) -> (usize, String) {
+    let dispersive = scene
+        .materials
+        .iter()
+        .any(|m| matches!(&m.kind, MaterialKind::Dielectric { ior } if ior.is_dispersive()));
+    let spectral_light = scene
+        .materials
+        .iter()
+        .filter_map(|m| m.emission.as_ref())
+        .chain(scene.lights.iter().map(|l| &l.intensity))
+        .any(|s| !matches!(s, Spectrum::Illuminant(_)));
+    if dispersive {
+        (100, "100 bins: dispersive glass splits light into single wavelengths; fine bins give a smooth rainbow, and compact storage keeps those photons lossless at any N".to_string())
+    } else if spectral_light {
+        (20, "20 bins: a spectral light (blackbody or measured) without dispersion; 20 bins resolve its shape".to_string())
+    } else {
+        (8, "8 bins: only RGB inputs and no dispersion, so spectral and RGB agree at any N (the paper's Cornell box); 8 bins suffice".to_string())
+    }
+}
+
+/// The `.gltf`/`.glb` files in a folder, sorted.
+pub fn list_scene_files(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.extension()
+                        .and_then(|e| e.to_str())
+                        .is_some_and(|e| e == "gltf" || e == "glb")
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+/// Resident memory of this process (Linux: /proc/self/statm), if known.
+pub fn resident_memory_bytes() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: u64 = s.split_whitespace().nth(1)?.parse().ok()?;
+    Some(pages * 4096)
+}
+
+/// Runs the viewer in a native window. Fails (without panicking) where no display is
+/// available.
+pub fn run_native(
+    source: SceneSource,
+    settings: RenderSettings,
+    capture: Option<Capture>,
+) -> Result<(), String> {
+    if !display_available() {
+        return Err("no display available (DISPLAY and WAYLAND_DISPLAY are unset): use `prismap render` for a headless render".to_string());
+    }
+    let options = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default()
+            .with_inner_size([1280.0, 800.0])
+            .with_title("prismap")
+            .with_drag_and_drop(true),
+        ..Default::default()
+    };
+    eframe::run_native(
+        "prismap",
+        options,
+        Box::new(move |cc| {
+            Ok(Box::new(ViewerApp::new(
+                &cc.egui_ctx,
+                source,
+                settings,
+                capture,
+            )))
+        }),
+    )
+    .map_err(|e| {
+        format!("cannot open the viewer window: {e}. Use `prismap render` for a headless render.")
+    })
+}
+
+/// Whether a window can be opened (X11 or Wayland on Linux; assumed elsewhere).
+pub fn display_available() -> bool {
+    if cfg!(target_os = "linux") {
+        std::env::var_os("DISPLAY").is_some_and(|v| !v.is_empty())
+            || std::env::var_os("WAYLAND_DISPLAY").is_some_and(|v| !v.is_empty())
+    } else {
+        true
+    }
+}

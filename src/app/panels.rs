@@ -1,0 +1,583 @@
+//! The viewer's panels: controls, statistics and memory, the pixel probe, the image.
+
+use egui::{Color32, RichText};
+use egui_plot::{Line, Plot, PlotPoints, Polygon};
+
+use super::{SceneSource, ToneMap, ViewerApp};
+use crate::photon::Storage;
+use crate::spectral::color::{SRGB_TO_XYZ, XYZ_TO_SRGB, dominant_wavelength, mul3, srgb_encode};
+
+/// The paper's bin counts.
+const PRESETS: [usize; 7] = [4, 5, 6, 8, 10, 20, 100];
+const SIZES: [u32; 5] = [128, 256, 384, 512, 768];
+
+pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
+    egui::Panel::left("controls")
+        .resizable(true)
+        .default_size(270.0)
+        .show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| {
+                let mut restart = false;
+                ui.heading("prismap");
+                let mut open = None;
+                egui::ComboBox::from_label("Scene")
+                    .selected_text(app.source().label())
+                    .width(190.0)
+                    .show_ui(ui, |ui| {
+                        for (name, _) in crate::scene::BUILTIN {
+                            let s = SceneSource::Builtin(name.to_string());
+                            if ui.selectable_label(*app.source() == s, s.label()).clicked() {
+                                open = Some(s);
+                            }
+                        }
+                        for p in app.scene_files.clone() {
+                            let s = SceneSource::File(p);
+                            if ui.selectable_label(*app.source() == s, s.label()).clicked() {
+                                open = Some(s);
+                            }
+                        }
+                    });
+                ui.horizontal(|ui| {
+                    ui.add(
+                        egui::TextEdit::singleline(&mut app.path_input)
+                            .hint_text("path/to/scene.gltf")
+                            .desired_width(170.0),
+                    );
+                    if ui.button("Open").clicked() && !app.path_input.trim().is_empty() {
+                        open = Some(SceneSource::File(app.path_input.trim().into()));
+                    }
+                });
+                ui.small("…or drop a .gltf/.glb on the window");
+                if let Some(s) = open {
+                    app.open(s);
+                }
+                ui.separator();
+
+                ui.label("Storage");
+                ui.horizontal(|ui| {
+                    for s in Storage::ALL {
+                        restart |= ui
+                            .radio_value(&mut app.settings.storage, s, s.name())
+                            .changed();
+                    }
+                });
+                ui.add_enabled_ui(app.settings.storage != Storage::Rgb, |ui| {
+                    let r = ui.add(
+                        egui::Slider::new(&mut app.settings.bins, 1..=1000)
+                            .logarithmic(true)
+                            .text("Bins"),
+                    );
+                    if r.changed() {
+                        app.auto_bins = false;
+                        restart = true;
+                    }
+                    ui.horizontal_wrapped(|ui| {
+                        for p in PRESETS {
+                            if ui
+                                .selectable_label(
+                                    !app.auto_bins && app.settings.bins == p,
+                                    p.to_string(),
+                                )
+                                .clicked()
+                            {
+                                app.settings.bins = p;
+                                app.auto_bins = false;
+                                restart = true;
+                            }
+                        }
+                        if ui.selectable_label(app.auto_bins, "auto").clicked() {
+                            app.auto_bins = true;
+                            restart = true;
+                        }
+                    });
+                    if app.auto_bins {
+                        ui.small(&app.auto_reason);
+                    }
+                });
+                restart |= ui
+                    .add(
+                        egui::Slider::new(&mut app.settings.photons_per_pass, 1_000..=2_000_000)
+                            .logarithmic(true)
+                            .text("Photons/pass"),
+                    )
+                    .changed();
+                restart |= ui
+                    .add(
+                        egui::Slider::new(&mut app.settings.final_gather_rays, 0..=64)
+                            .text("Final gather"),
+                    )
+                    .changed();
+                {
+                    egui::ComboBox::from_label("Resolution")
+                        .selected_text(format!("{}×{}", app.settings.width, app.settings.height))
+                        .show_ui(ui, |ui| {
+                            for s in SIZES {
+                                if ui
+                                    .selectable_label(app.settings.width == s, format!("{s}×{s}"))
+                                    .clicked()
+                                {
+                                    app.settings.width = s;
+                                    app.settings.height = s;
+                                    restart = true;
+                                }
+                            }
+                        });
+                }
+                ui.separator();
+                ui.add(
+                    egui::Slider::new(&mut app.exposure, 0.05..=50.0)
+                        .logarithmic(true)
+                        .text("Exposure"),
+                );
+                ui.horizontal(|ui| {
+                    ui.radio_value(&mut app.tone, ToneMap::Clamp, "clamp");
+                    ui.radio_value(&mut app.tone, ToneMap::Reinhard, "Reinhard");
+                });
+                ui.separator();
+                ui.horizontal(|ui| {
+                    let label = if app.paused { "Resume" } else { "Pause" };
+                    if ui.button(label).clicked() {
+                        app.set_paused(!app.paused);
+                    }
+                    if ui.button("Restart").clicked() {
+                        restart = true;
+                    }
+                    if ui.button("Reset view").clicked() {
+                        app.orbit = super::Orbit::new(&app.scene);
+                        restart = true;
+                    }
+                });
+                ui.horizontal(|ui| {
+                    for ext in ["png", "exr"] {
+                        if ui.button(format!("Save {}", ext.to_uppercase())).clicked()
+                            && let Err(e) = app.save(ext)
+                        {
+                            app.status = format!("save failed: {e}");
+                        }
+                    }
+                });
+                ui.small(format!("into {}/", app.save_dir.display()));
+                if restart {
+                    app.restart();
+                }
+                if !app.status.is_empty() {
+                    ui.separator();
+                    ui.label(&app.status);
+                }
+                if let Some(e) = app.render_error() {
+                    ui.colored_label(Color32::LIGHT_RED, format!("error: {e}"));
+                }
+            });
+        });
+}
+
+/// Bytes as the memory panel shows them ("4.93 MB", "620.1 kB").
+pub fn format_bytes(bytes: f64) -> String {
+    if bytes >= 1e6 {
+        format!("{:.2} MB", bytes / 1e6)
+    } else {
+        format!("{:.1} kB", bytes / 1e3)
+    }
+}
+
+pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
+    egui::Panel::right("stats")
+        .resizable(true)
+        .default_size(290.0)
+        .show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| {
+                ui.heading("Render");
+                let Some(s) = &app.snapshot else {
+                    ui.label("rendering the first pass…");
+                    return;
+                };
+                let st = &s.stats;
+                let pixels = (app.settings.width * app.settings.height) as f64;
+                let secs = st.photon_seconds + st.gather_seconds;
+                egui::Grid::new("stats")
+                    .num_columns(2)
+                    .striped(true)
+                    .show(ui, |ui| {
+                        let mut row = |k: &str, v: String| {
+                            ui.label(k);
+                            ui.label(v);
+                            ui.end_row();
+                        };
+                        row("passes", st.passes.to_string());
+                        row("photons emitted", st.photons_emitted.to_string());
+                        row("stored (global)", st.stored_global.to_string());
+                        row("stored (caustic)", st.stored_caustic.to_string());
+                        row("spike records", st.spike_records.to_string());
+                        row(
+                            "time per pass",
+                            format!("{:.0} ms", 1e3 * st.last_pass_seconds),
+                        );
+                        row(
+                            "samples per second",
+                            format!("{:.0}", pixels * st.passes as f64 / secs.max(1e-9)),
+                        );
+                        row("radius (global)", format!("{:.4}", st.r_global));
+                        if st.r_caustic > 0.0 {
+                            row("radius (caustic)", format!("{:.4}", st.r_caustic));
+                        }
+                    });
+                ui.separator();
+                ui.heading("Memory");
+                let m = &s.memory;
+                let stored = (st.stored_global + st.stored_caustic) as f64;
+                egui::Grid::new("memory")
+                    .num_columns(2)
+                    .striped(true)
+                    .show(ui, |ui| {
+                        let mut row = |k: &str, v: String| {
+                            ui.label(k);
+                            ui.label(v);
+                            ui.end_row();
+                        };
+                        row("global map", format_bytes(m.global_map as f64));
+                        row("caustic map", format_bytes(m.caustic_map as f64));
+                        row("photon maps", format_bytes(m.photon_maps as f64));
+                        row("bytes per photon", format!("{:.1}", s.bytes_per_photon));
+                        row("film (+ probes)", format_bytes(m.film as f64));
+                        row("BVH", format_bytes(m.bvh as f64));
+                        if let Some(r) = super::resident_memory_bytes() {
+                            row("process resident", format_bytes(r as f64));
+                        }
+                    });
+                // What the other storages would take for the same photons (exact: fixed sizes).
+                let bins = if app.settings.storage == Storage::Rgb {
+                    app.settings.bins
+                } else {
+                    s.bins
+                };
+                ui.label(RichText::new("same photons, other storage:").small());
+                for other in Storage::ALL {
+                    let b = stored
+                        * other.bytes_per_photon(if other == Storage::Rgb { 3 } else { bins })
+                            as f64;
+                    let here = other == app.settings.storage;
+                    let text = format!(
+                        "{}{:<8} {} ({} B/photon{})",
+                        if here { "> " } else { "  " },
+                        other.name(),
+                        format_bytes(b),
+                        other.bytes_per_photon(if other == Storage::Rgb { 3 } else { bins }),
+                        if other == Storage::Full {
+                            format!(", {bins} bins")
+                        } else {
+                            String::new()
+                        }
+                    );
+                    ui.label(RichText::new(text).monospace().small());
+                }
+                let hist = app.memory_history();
+                if hist.len() > 1 {
+                    Plot::new("memory history")
+                        .height(120.0)
+                        .allow_drag(false)
+                        .allow_zoom(false)
+                        .allow_scroll(false)
+                        .legend(egui_plot::Legend::default())
+                        .y_axis_label("MB")
+                        .show(ui, |p| {
+                            let maps: Vec<[f64; 2]> = hist
+                                .iter()
+                                .map(|h| [h.seconds, h.photon_maps / 1e6])
+                                .collect();
+                            let rss: Vec<[f64; 2]> =
+                                hist.iter().map(|h| [h.seconds, h.resident / 1e6]).collect();
+                            p.line(Line::new("photon maps", PlotPoints::from(maps)));
+                            p.line(Line::new("resident", PlotPoints::from(rss)));
+                        });
+                }
+                if !s.skipped.is_empty() {
+                    ui.separator();
+                    ui.label(RichText::new("skipped").strong());
+                    for k in &s.skipped {
+                        ui.small(k);
+                    }
+                }
+                if !s.warnings.is_empty() {
+                    ui.label(RichText::new("scene warnings").strong());
+                    for w in &s.warnings {
+                        ui.small(w);
+                    }
+                }
+                if let Some(l) = app.first_image_latency {
+                    ui.small(format!(
+                        "first image after the last change: {:.0} ms",
+                        l * 1e3
+                    ));
+                }
+            });
+        });
+}
+
+/// Display colour of a spectral line at `l` nm (for tinting the axis).
+fn wavelength_colour(l: f64) -> Color32 {
+    let c = crate::spectral::tables::cmf();
+    let rgb = mul3(&XYZ_TO_SRGB, [c.x.eval(l), c.y.eval(l), c.z.eval(l)]).map(|v| v.max(0.0));
+    let m = rgb.iter().cloned().fold(1e-9, f64::max);
+    let bright = (c.y.eval(l) / 0.3).min(1.0).sqrt().max(0.15);
+    let [r, g, b] = rgb.map(|v| (srgb_encode((v / m * bright) as f32) * 255.0) as u8);
+    Color32::from_rgb(r, g, b)
+}
+
+const PROBE_COLOURS: [Color32; 4] = [
+    Color32::WHITE,
+    Color32::from_rgb(255, 170, 0),
+    Color32::from_rgb(0, 200, 255),
+    Color32::from_rgb(255, 90, 200),
+];
+
+pub fn probe(app: &mut ViewerApp, ui: &mut egui::Ui) {
+    let has_probe = app.probe.is_some() || !app.pinned.is_empty();
+    egui::Panel::bottom("probe")
+        .resizable(true)
+        .min_size(if has_probe { 230.0 } else { 28.0 })
+        .show(ui, |ui| {
+            ui.horizontal(|ui| {
+                ui.heading("Pixel spectrum");
+                ui.small("click the image (or hold Alt and hover) to probe a pixel");
+            });
+            let Some(snap) = app.snapshot.clone() else {
+                return;
+            };
+            let mut shown: Vec<(u32, u32)> = app.pinned.clone();
+            if let Some(p) = app.probe
+                && !shown.contains(&p)
+            {
+                shown.push(p);
+            }
+            if shown.is_empty() {
+                return;
+            }
+            let spectral = app.settings.storage != Storage::Rgb;
+            ui.horizontal(|ui| {
+                // Readouts for each probe.
+                ui.vertical(|ui| {
+                    for (i, &(x, y)) in shown.iter().enumerate() {
+                        let Some(p) = snap.probes.iter().find(|p| (p.x, p.y) == (x, y)) else {
+                            ui.label(format!("({x}, {y}): waiting for the next pass…"));
+                            continue;
+                        };
+                        let mean = p.mean();
+                        let lin = snap.srgb_weights.iter().zip(&mean).fold(
+                            [0.0f64; 3],
+                            |mut acc, (w, v)| {
+                                for c in 0..3 {
+                                    acc[c] += (w[c] * v) as f64;
+                                }
+                                acc
+                            },
+                        );
+                        let xyz = mul3(&SRGB_TO_XYZ, lin);
+                        let disp = lin
+                            .map(|v| (srgb_encode(v as f32 * app.exposure) * 255.0).round() as u8);
+                        let pixel = snap
+                            .image
+                            .get(x.min(snap.image.width - 1), y.min(snap.image.height - 1));
+                        let dom = dominant_wavelength(xyz)
+                            .map(|l| {
+                                if l < 0.0 {
+                                    format!("{:.0} nm (complementary)", -l)
+                                } else {
+                                    format!("{l:.0} nm")
+                                }
+                            })
+                            .unwrap_or_else(|| "—".into());
+                        ui.horizontal(|ui| {
+                            ui.colored_label(PROBE_COLOURS[i % 4], format!("probe ({x}, {y})"));
+                            let (rect, _) = ui
+                                .allocate_exact_size(egui::vec2(14.0, 14.0), egui::Sense::hover());
+                            ui.painter().rect_filled(
+                                rect,
+                                2.0,
+                                Color32::from_rgb(disp[0], disp[1], disp[2]),
+                            );
+                            if app.pinned.contains(&(x, y)) {
+                                if ui.small_button("unpin").clicked() {
+                                    app.unpin((x, y));
+                                }
+                            } else if ui.small_button("pin").clicked() {
+                                app.pin_probe();
+                            }
+                            if ui.small_button("CSV").clicked() {
+                                match export_csv(app, &snap, p) {
+                                    Ok(path) => app.status = format!("saved {}", path.display()),
+                                    Err(e) => app.status = format!("CSV export failed: {e}"),
+                                }
+                            }
+                        });
+                        ui.small(format!("XYZ {:.4} {:.4} {:.4}", xyz[0], xyz[1], xyz[2]));
+                        ui.small(format!(
+                            "linear sRGB {:.4} {:.4} {:.4}",
+                            lin[0], lin[1], lin[2]
+                        ));
+                        ui.small(format!(
+                            "display sRGB {} {} {}   dominant λ {dom}",
+                            disp[0], disp[1], disp[2]
+                        ));
+                        ui.small(format!(
+                        "image pixel {:.4} {:.4} {:.4} over {} passes; spectrum over the last {}",
+                        pixel[0], pixel[1], pixel[2], snap.stats.passes, p.passes
+                    ));
+                    }
+                });
+                // The plot: radiance per bin against wavelength, the axis tinted with the spectrum.
+                let max = snap
+                    .probes
+                    .iter()
+                    .filter(|p| shown.contains(&(p.x, p.y)))
+                    .flat_map(|p| p.mean())
+                    .fold(0.0f32, f32::max)
+                    .max(1e-6) as f64;
+                Plot::new("spd")
+                    .height(ui.available_height().max(120.0))
+                    .x_axis_label(if spectral {
+                        "wavelength (nm)"
+                    } else {
+                        "RGB transport: channels at nominal primaries (nm)"
+                    })
+                    .y_axis_label("radiance")
+                    .include_x(360.0)
+                    .include_x(830.0)
+                    .include_y(0.0)
+                    .show(ui, |plot| {
+                        let h = 0.05 * max;
+                        let mut l = 360.0;
+                        while l < 830.0 {
+                            let poly = Polygon::new(
+                                "",
+                                PlotPoints::from(vec![
+                                    [l, -h],
+                                    [l + 5.0, -h],
+                                    [l + 5.0, 0.0],
+                                    [l, 0.0],
+                                ]),
+                            )
+                            .fill_color(wavelength_colour(l + 2.5))
+                            .stroke(egui::Stroke::NONE);
+                            plot.polygon(poly);
+                            l += 5.0;
+                        }
+                        for (i, &(x, y)) in shown.iter().enumerate() {
+                            if let Some(p) = snap.probes.iter().find(|p| (p.x, p.y) == (x, y)) {
+                                let pts: Vec<[f64; 2]> = snap
+                                    .wavelengths
+                                    .iter()
+                                    .zip(p.mean())
+                                    .map(|(l, v)| [*l, v as f64])
+                                    .collect();
+                                plot.line(
+                                    Line::new(format!("({x}, {y})"), PlotPoints::from(pts))
+                                        .color(PROBE_COLOURS[i % 4]),
+                                );
+                            }
+                        }
+                    });
+            });
+        });
+}
+
+fn export_csv(
+    app: &ViewerApp,
+    snap: &super::Snapshot,
+    p: &crate::render::Probe,
+) -> Result<std::path::PathBuf, String> {
+    std::fs::create_dir_all(&app.save_dir).map_err(|e| e.to_string())?;
+    let path = app.save_dir.join(format!("probe-{}-{}.csv", p.x, p.y));
+    let mut text = if app.settings.storage == Storage::Rgb {
+        "channel,radiance\n".to_string()
+    } else {
+        "wavelength_nm,radiance\n".to_string()
+    };
+    for (i, (l, v)) in snap.wavelengths.iter().zip(p.mean()).enumerate() {
+        if app.settings.storage == Storage::Rgb {
+            text += &format!("{},{v}\n", ["r", "g", "b"][i.min(2)]);
+        } else {
+            text += &format!("{l},{v}\n");
+        }
+    }
+    crate::output::write_atomic(&path, |tmp| {
+        std::fs::write(tmp, text.as_bytes()).map_err(|e| e.to_string())
+    })
+    .map_err(|e| e.to_string())?;
+    Ok(path)
+}
+
+pub fn image(app: &mut ViewerApp, ui: &mut egui::Ui) {
+    egui::CentralPanel::default().show(ui, |ui| {
+        let Some(tex) = &app.texture else {
+            ui.centered_and_justified(|ui| ui.label("rendering…"));
+            return;
+        };
+        let (w, h) = (app.settings.width as f32, app.settings.height as f32);
+        let avail = ui.available_size();
+        let scale = (avail.x / w).min(avail.y / h).max(0.05);
+        let size = egui::vec2(w * scale, h * scale);
+        let resp = ui
+            .centered_and_justified(|ui| {
+                ui.add(
+                    egui::Image::from_texture(egui::load::SizedTexture::new(tex.id(), size))
+                        .sense(egui::Sense::click_and_drag()),
+                )
+            })
+            .inner;
+        let to_pixel = |pos: egui::Pos2| -> Option<(u32, u32)> {
+            let r = resp.rect;
+            let u = (pos.x - r.min.x) / r.width();
+            let v = (pos.y - r.min.y) / r.height();
+            ((0.0..1.0).contains(&u) && (0.0..1.0).contains(&v))
+                .then_some(((u * w) as u32, (v * h) as u32))
+        };
+        let mut restart = false;
+        if resp.clicked()
+            && let Some(px) = resp.interact_pointer_pos().and_then(to_pixel)
+        {
+            app.set_probe(px);
+        }
+        if resp.hovered()
+            && ui.input(|i| i.modifiers.alt)
+            && let Some(px) = resp.hover_pos().and_then(to_pixel)
+            && app.probe != Some(px)
+        {
+            app.set_probe(px);
+        }
+        if resp.dragged_by(egui::PointerButton::Primary) && !ui.input(|i| i.modifiers.shift) {
+            let d = resp.drag_delta();
+            app.orbit.rotate(d.x, d.y);
+            restart |= d != egui::Vec2::ZERO;
+        } else if resp.dragged_by(egui::PointerButton::Secondary)
+            || resp.dragged_by(egui::PointerButton::Primary)
+        {
+            let d = resp.drag_delta();
+            app.orbit.pan_by(d.x, d.y, size.y);
+            restart |= d != egui::Vec2::ZERO;
+        }
+        if resp.hovered() {
+            let s = ui.input(|i| i.smooth_scroll_delta.y);
+            if s != 0.0 {
+                app.orbit.zoom_by(s);
+                restart = true;
+            }
+        }
+        // Mark probes on the image.
+        let mut marks: Vec<(u32, u32)> = app.pinned.clone();
+        marks.extend(app.probe);
+        for (i, (x, y)) in marks.iter().enumerate() {
+            let p =
+                resp.rect.min + egui::vec2((*x as f32 + 0.5) * scale, (*y as f32 + 0.5) * scale);
+            let colour = if Some((*x, *y)) == app.probe {
+                PROBE_COLOURS[0]
+            } else {
+                PROBE_COLOURS[(i + 1) % 4]
+            };
+            ui.painter()
+                .circle_stroke(p, 5.0, egui::Stroke::new(1.5, colour));
+        }
+        if restart {
+            app.restart();
+        }
+    });
+}

@@ -1,0 +1,301 @@
+//! The render worker: its own thread driving its own rayon pool. The UI sends
+//! [`Command`]s; after each pass the worker publishes only the newest [`Snapshot`] and
+//! asks for a repaint. The UI never waits on a pass: a new `Start` raises the running
+//! session's cancel flag, so the old pass stops within one photon chunk or image row, and
+//! a generation number keeps any late result out of the new image.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crate::render::{Image, MemoryReport, Probe, RenderSession, RenderSettings, RenderStats};
+use crate::scene::Scene;
+
+pub enum Command {
+    /// Start rendering from scratch (cancels whatever runs).
+    Start {
+        scene: Arc<Scene>,
+        settings: RenderSettings,
+        generation: u64,
+    },
+    Pause(bool),
+    /// Pixels whose spectra to keep.
+    Probes(Vec<(u32, u32)>),
+    /// Stop after `passes` passes (None: run until paused or restarted).
+    StopAfter(Option<u64>),
+}
+
+/// What the UI shows after a pass.
+#[derive(Clone)]
+pub struct Snapshot {
+    pub generation: u64,
+    pub image: Arc<Image>,
+    pub stats: RenderStats,
+    pub memory: MemoryReport,
+    pub bytes_per_photon: f64,
+    pub bins: usize,
+    pub wavelengths: Vec<f64>,
+    pub srgb_weights: Vec<[f32; 3]>,
+    pub probes: Vec<Probe>,
+    pub skipped: Vec<String>,
+    pub warnings: Vec<String>,
+    /// Seconds from the `Start` to this snapshot.
+    pub since_start: f64,
+}
+
+/// Shared state between the worker and the UI.
+#[derive(Default)]
+struct Shared {
+    snapshot: Mutex<Option<Snapshot>>,
+    error: Mutex<Option<(u64, String)>>,
+}
+
+pub struct Worker {
+    tx: Sender<Command>,
+    shared: Arc<Shared>,
+    /// Cancel flag of the session currently running (swapped at each start).
+    cancel: Arc<Mutex<Arc<AtomicBool>>>,
+    generation: Arc<AtomicU64>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Worker {
+    /// Starts the worker thread; `repaint` is called whenever there is news.
+    pub fn spawn(repaint: impl Fn() + Send + 'static) -> Self {
+        let (tx, rx) = mpsc::channel();
+        let shared = Arc::new(Shared::default());
+        let cancel = Arc::new(Mutex::new(Arc::new(AtomicBool::new(false))));
+        let generation = Arc::new(AtomicU64::new(0));
+        let thread = {
+            let shared = shared.clone();
+            let cancel = cancel.clone();
+            let generation = generation.clone();
+            std::thread::Builder::new()
+                .name("prismap-render".into())
+                .spawn(move || run(rx, shared, cancel, generation, repaint))
+                .ok()
+        };
+        Self {
+            tx,
+            shared,
+            cancel,
+            generation,
+            thread,
+        }
+    }
+
+    /// Starts a new render; returns its generation.
+    pub fn start(&self, scene: Arc<Scene>, settings: RenderSettings) -> u64 {
+        let generation = self.generation.fetch_add(1, Ordering::SeqCst) + 1;
+        // Stop the running pass now; the worker picks the new job up right after.
+        self.cancel
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .store(true, Ordering::Relaxed);
+        let _ = self.tx.send(Command::Start {
+            scene,
+            settings,
+            generation,
+        });
+        generation
+    }
+
+    pub fn send(&self, c: Command) {
+        let _ = self.tx.send(c);
+    }
+
+    /// The newest snapshot, if it belongs to the current generation.
+    pub fn latest(&self) -> Option<Snapshot> {
+        let g = self.generation.load(Ordering::SeqCst);
+        self.shared
+            .snapshot
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .as_ref()
+            .filter(|s| s.generation == g)
+            .cloned()
+    }
+
+    /// An error of the current generation (a failed or panicking pass).
+    pub fn error(&self) -> Option<String> {
+        let g = self.generation.load(Ordering::SeqCst);
+        self.shared
+            .error
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .as_ref()
+            .filter(|(eg, _)| *eg == g)
+            .map(|(_, e)| e.clone())
+    }
+
+    pub fn generation(&self) -> u64 {
+        self.generation.load(Ordering::SeqCst)
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.cancel
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .store(true, Ordering::Relaxed);
+        // Closing the channel ends the loop.
+        let (tx, _) = mpsc::channel();
+        drop(std::mem::replace(&mut self.tx, tx));
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+struct Job {
+    session: RenderSession,
+    generation: u64,
+    started: Instant,
+}
+
+fn run(
+    rx: Receiver<Command>,
+    shared: Arc<Shared>,
+    cancel_slot: Arc<Mutex<Arc<AtomicBool>>>,
+    current: Arc<AtomicU64>,
+    repaint: impl Fn(),
+) {
+    // Leave one core to the UI.
+    let threads = std::thread::available_parallelism()
+        .map(|n| n.get().saturating_sub(1).max(1))
+        .unwrap_or(1);
+    let pool = match rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("prismap-pass-{i}"))
+        .build()
+    {
+        Ok(p) => p,
+        Err(e) => {
+            *shared.error.lock().unwrap_or_else(PoisonError::into_inner) = Some((
+                current.load(Ordering::SeqCst),
+                format!("cannot start worker threads: {e}"),
+            ));
+            repaint();
+            return;
+        }
+    };
+    let mut job: Option<Job> = None;
+    let mut paused = false;
+    let mut probes: Vec<(u32, u32)> = Vec::new();
+    let mut stop_after: Option<u64> = None;
+    loop {
+        // Take every pending command; block only when there is nothing to render.
+        let idle = paused
+            || job.is_none()
+            || stop_after
+                .is_some_and(|n| job.as_ref().is_some_and(|j| j.session.stats().passes >= n));
+        let first = if idle {
+            match rx.recv_timeout(Duration::from_millis(200)) {
+                Ok(c) => Some(c),
+                Err(mpsc::RecvTimeoutError::Timeout) => None,
+                Err(mpsc::RecvTimeoutError::Disconnected) => return,
+            }
+        } else {
+            match rx.try_recv() {
+                Ok(c) => Some(c),
+                Err(TryRecvError::Empty) => None,
+                Err(TryRecvError::Disconnected) => return,
+            }
+        };
+        let mut pending: Vec<Command> = first.into_iter().collect();
+        while let Ok(c) = rx.try_recv() {
+            pending.push(c);
+        }
+        for c in pending {
+            match c {
+                Command::Start {
+                    scene,
+                    settings,
+                    generation,
+                } => {
+                    if generation != current.load(Ordering::SeqCst) {
+                        continue; // superseded before it started
+                    }
+                    match pool.install(|| RenderSession::new(&scene, settings)) {
+                        Ok(mut session) => {
+                            session.set_probes(&probes);
+                            *cancel_slot.lock().unwrap_or_else(PoisonError::into_inner) =
+                                session.cancel_flag();
+                            job = Some(Job {
+                                session,
+                                generation,
+                                started: Instant::now(),
+                            });
+                        }
+                        Err(e) => {
+                            job = None;
+                            *shared.error.lock().unwrap_or_else(PoisonError::into_inner) =
+                                Some((generation, e.to_string()));
+                            repaint();
+                        }
+                    }
+                }
+                Command::Pause(p) => paused = p,
+                Command::Probes(p) => {
+                    probes = p;
+                    if let Some(j) = &mut job {
+                        j.session.set_probes(&probes);
+                    }
+                }
+                Command::StopAfter(n) => stop_after = n,
+            }
+        }
+        let Some(j) = &mut job else { continue };
+        if paused || stop_after.is_some_and(|n| j.session.stats().passes >= n) {
+            continue;
+        }
+        if j.generation != current.load(Ordering::SeqCst) {
+            continue; // a newer Start is on its way
+        }
+        // One pass; a panic inside is caught and shown, and the next change restarts.
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            pool.install(|| j.session.run_pass())
+        }));
+        match result {
+            Ok(Ok(())) => {
+                let s = &j.session;
+                let snap = Snapshot {
+                    generation: j.generation,
+                    image: Arc::new(s.image()),
+                    stats: s.stats().clone(),
+                    memory: s.memory(),
+                    bytes_per_photon: s.bytes_per_photon(),
+                    bins: s.scene().bins(),
+                    wavelengths: s.scene().grid.centers().to_vec(),
+                    srgb_weights: s.scene().grid.srgb_weights().to_vec(),
+                    probes: s.probes().to_vec(),
+                    skipped: s.skipped(),
+                    warnings: s.scene().warnings.clone(),
+                    since_start: j.started.elapsed().as_secs_f64(),
+                };
+                if j.generation == current.load(Ordering::SeqCst) {
+                    *shared
+                        .snapshot
+                        .lock()
+                        .unwrap_or_else(PoisonError::into_inner) = Some(snap);
+                    repaint();
+                }
+            }
+            Ok(Err(_cancelled)) => {}
+            Err(panic) => {
+                let msg = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_else(|| "unknown panic".to_string());
+                *shared.error.lock().unwrap_or_else(PoisonError::into_inner) =
+                    Some((j.generation, format!("the render pass failed: {msg}")));
+                job = None;
+                repaint();
+            }
+        }
+    }
+}

@@ -1,0 +1,188 @@
+//! The viewer's behaviour, headless with egui_kittest: restarts on setting changes, the
+//! memory readout, the pixel probe against the engine, saving.
+
+use std::time::{Duration, Instant};
+
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use prismap::app::{SceneSource, ViewerApp, format_bytes};
+use prismap::photon::Storage;
+use prismap::render::{RenderSession, RenderSettings};
+
+fn settings() -> RenderSettings {
+    RenderSettings {
+        bins: 20,
+        storage: Storage::Full,
+        width: 48,
+        height: 48,
+        photons_per_pass: 4_000,
+        final_gather_rays: 1,
+        ..RenderSettings::default()
+    }
+}
+
+fn harness(scene: &str) -> Harness<'static, ViewerApp> {
+    let ctx = egui::Context::default();
+    let app = ViewerApp::new(&ctx, SceneSource::Builtin(scene.into()), settings(), None);
+    Harness::builder()
+        .with_size(egui::vec2(1400.0, 1000.0))
+        .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app)
+}
+
+/// Steps the UI until `cond` holds (the worker renders in the background).
+fn wait_until(h: &mut Harness<'static, ViewerApp>, what: &str, cond: impl Fn(&ViewerApp) -> bool) {
+    let start = Instant::now();
+    loop {
+        h.step();
+        if cond(h.state()) {
+            return;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "timed out waiting for {what}"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+fn passes(app: &ViewerApp) -> u64 {
+    app.snapshot.as_ref().map_or(0, |s| s.stats.passes)
+}
+
+#[test]
+fn switching_storage_restarts_and_changes_the_memory_readout() {
+    let mut h = harness("cornell-box");
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    let full = h.state().snapshot.clone().unwrap();
+    assert_eq!(full.bytes_per_photon, 17.0 + 4.0 * 20.0);
+    let full_text = format_bytes(full.memory.photon_maps as f64);
+    h.step();
+    assert!(
+        h.query_all_by_label(&full_text).count() >= 1,
+        "the readout shows {full_text}"
+    );
+    let gen_before = h.state().last_restart_generation;
+    h.get_by_label("compact").click();
+    h.step();
+    assert!(
+        h.state().last_restart_generation > gen_before,
+        "storage change restarts"
+    );
+    assert_eq!(h.state().settings.storage, Storage::Compact);
+    wait_until(&mut h, "a compact pass", |a| {
+        a.snapshot
+            .as_ref()
+            .is_some_and(|s| s.bytes_per_photon == 29.0)
+    });
+    let compact = h.state().snapshot.clone().unwrap();
+    assert!(
+        compact.memory.photon_maps * 3 < full.memory.photon_maps,
+        "compact uses far less"
+    );
+    let compact_text = format_bytes(compact.memory.photon_maps as f64);
+    h.step();
+    assert!(
+        h.query_all_by_label(&compact_text).count() >= 1,
+        "the readout shows {compact_text}"
+    );
+    assert_eq!(
+        h.query_all_by_label(&full_text).count(),
+        0,
+        "the old readout is gone"
+    );
+}
+
+#[test]
+fn changing_bins_restarts() {
+    let mut h = harness("cornell-box");
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    let gen_before = h.state().last_restart_generation;
+    h.get_by_label("100").click();
+    h.step();
+    assert!(h.state().last_restart_generation > gen_before);
+    wait_until(&mut h, "a 100-bin pass", |a| {
+        a.snapshot.as_ref().is_some_and(|s| s.bins == 100)
+    });
+    // "auto" picks and explains.
+    h.get_by_label("auto").click();
+    h.step();
+    assert!(h.state().auto_bins);
+    assert_eq!(h.state().settings.bins, 8, "RGB-only scene");
+    h.step();
+    h.get_by_label_contains("only RGB inputs");
+}
+
+#[test]
+fn clicking_a_pixel_plots_the_engines_spectrum_for_it() {
+    let mut h = harness("prism");
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    h.get_by_role(egui::accesskit::Role::Image).click();
+    h.step();
+    let probe = h.state().probe.expect("the click probes a pixel");
+    wait_until(&mut h, "probe data", |a| {
+        a.snapshot.as_ref().is_some_and(|s| {
+            s.probes
+                .iter()
+                .any(|p| (p.x, p.y) == probe && p.passes >= 2)
+        })
+    });
+    h.set_size(egui::vec2(1400.0, 1000.0));
+    h.step();
+    h.get_by_label_contains(&format!("({}, {})", probe.0, probe.1));
+    let snap = h.state().snapshot.clone().unwrap();
+    let shown = snap.probes.iter().find(|p| (p.x, p.y) == probe).unwrap();
+    // The engine, same settings: passes before the click without a probe, then with it.
+    let scene = prismap::scene::load_builtin("prism").unwrap();
+    let mut engine = RenderSession::new(&scene, settings()).unwrap();
+    let before = snap.stats.passes - shown.passes;
+    for _ in 0..before {
+        engine.run_pass().unwrap();
+    }
+    engine.set_probes(&[probe]);
+    for _ in 0..shown.passes {
+        engine.run_pass().unwrap();
+    }
+    assert_eq!(
+        engine.probes()[0].sum,
+        shown.sum,
+        "the viewer's probe is the engine's spectrum"
+    );
+    // The probed spectrum's colour is the pixel's colour (identical when the probe covers every pass).
+    let w = engine.scene().grid.srgb_weights();
+    let mean = shown.mean();
+    let rgb: Vec<f32> = (0..3)
+        .map(|c| w.iter().zip(&mean).map(|(w, v)| w[c] * v).sum())
+        .collect();
+    if before == 0 {
+        let px = snap.image.get(probe.0, probe.1);
+        for c in 0..3 {
+            assert!(
+                (rgb[c] - px[c]).abs() <= 1e-4 * (1.0 + px[c].abs()),
+                "{rgb:?} vs {px:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn saving_writes_png_and_exr() {
+    let mut h = harness("cornell-box");
+    let dir = std::env::temp_dir().join(format!("prismap-viewer-save-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    h.state_mut().save_dir = dir.clone();
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    h.get_by_label("Save PNG").click();
+    h.step();
+    h.get_by_label("Save EXR").click();
+    h.step();
+    let files: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(files.iter().any(|f| f.ends_with(".png")), "{files:?}");
+    assert!(files.iter().any(|f| f.ends_with(".exr")), "{files:?}");
+    let png = files.iter().find(|f| f.ends_with(".png")).unwrap();
+    let img = image::open(dir.join(png)).unwrap();
+    assert_eq!((img.width(), img.height()), (48, 48));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
