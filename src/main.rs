@@ -100,6 +100,21 @@ struct ViewArgs {
     screenshot: Option<PathBuf>,
     #[arg(long, default_value_t = 8)]
     after_passes: u64,
+    /// Probe this pixel from the start, as X,Y.
+    #[arg(long, value_parser = parse_pixel)]
+    probe: Option<(u32, u32)>,
+}
+
+fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
+    let (x, y) = s
+        .split_once(',')
+        .ok_or_else(|| format!("pixel '{s}' must look like 120,64"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("pixel '{s}': '{v}' is not a whole number"))
+    };
+    Ok((p(x)?, p(y)?))
 }
 
 fn view(args: ViewArgs) -> Result<()> {
@@ -131,7 +146,16 @@ fn view(args: ViewArgs) -> Result<()> {
         path,
         after_passes: args.after_passes,
     });
-    prismap::app::run_native(source, settings, capture).map_err(|e| anyhow::anyhow!(e))
+    if let Some((x, y)) = args.probe
+        && (x >= settings.width || y >= settings.height)
+    {
+        bail!(
+            "--probe {x},{y}: outside the {}x{} image",
+            settings.width,
+            settings.height
+        );
+    }
+    prismap::app::run_native(source, settings, capture, args.probe).map_err(|e| anyhow::anyhow!(e))
 }
 
 fn parse_storage(s: &str) -> Result<Storage, String> {

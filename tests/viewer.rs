@@ -46,7 +46,10 @@ fn wait_until(h: &mut Harness<'static, ViewerApp>, what: &str, cond: impl Fn(&Vi
 }
 
 fn passes(app: &ViewerApp) -> u64 {
-    app.snapshot.as_ref().map_or(0, |s| s.stats.passes)
+    app.snapshot
+        .as_ref()
+        .filter(|s| !s.preview)
+        .map_or(0, |s| s.stats.passes)
 }
 
 #[test]
@@ -101,7 +104,9 @@ fn changing_bins_restarts() {
     h.step();
     assert!(h.state().last_restart_generation > gen_before);
     wait_until(&mut h, "a 100-bin pass", |a| {
-        a.snapshot.as_ref().is_some_and(|s| s.bins == 100)
+        a.snapshot
+            .as_ref()
+            .is_some_and(|s| s.bins == 100 && !s.preview)
     });
     // "auto" picks and explains.
     h.get_by_label("auto").click();
@@ -185,4 +190,26 @@ fn saving_writes_png_and_exr() {
     let img = image::open(dir.join(png)).unwrap();
     assert_eq!((img.width(), img.height()), (48, 48));
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn viewer_image_after_n_passes_equals_the_engines() {
+    let mut h = harness("prism");
+    h.state().stop_after(Some(3));
+    wait_until(&mut h, "3 passes", |a| passes(a) == 3);
+    let shown = h.state().snapshot.clone().unwrap();
+    let scene = prismap::scene::load_builtin("prism").unwrap();
+    let mut engine = RenderSession::new(&scene, settings()).unwrap();
+    for _ in 0..3 {
+        engine.run_pass().unwrap();
+    }
+    assert!(
+        engine
+            .image()
+            .pixels
+            .iter()
+            .zip(&shown.image.pixels)
+            .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)),
+        "the viewer renders exactly what `prismap render` renders"
+    );
 }

@@ -214,6 +214,11 @@ impl ViewerApp {
         }
     }
 
+    /// Stop refining after `passes` passes (None: refine until paused).
+    pub fn stop_after(&self, passes: Option<u64>) {
+        self.worker.send(Command::StopAfter(passes));
+    }
+
     pub fn set_paused(&mut self, paused: bool) {
         self.paused = paused;
         self.worker.send(Command::Pause(paused));
@@ -486,6 +491,7 @@ pub fn run_native(
     source: SceneSource,
     settings: RenderSettings,
     capture: Option<Capture>,
+    probe: Option<(u32, u32)>,
 ) -> Result<(), String> {
     if !display_available() {
         return Err("no display available (DISPLAY and WAYLAND_DISPLAY are unset): use `prismap render` for a headless render".to_string());
@@ -501,12 +507,11 @@ pub fn run_native(
         "prismap",
         options,
         Box::new(move |cc| {
-            Ok(Box::new(ViewerApp::new(
-                &cc.egui_ctx,
-                source,
-                settings,
-                capture,
-            )))
+            let mut app = ViewerApp::new(&cc.egui_ctx, source, settings, capture);
+            if let Some(p) = probe {
+                app.set_probe(p);
+            }
+            Ok(Box::new(app))
         }),
     )
     .map_err(|e| {

@@ -203,7 +203,14 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                             ui.label(v);
                             ui.end_row();
                         };
-                        row("passes", st.passes.to_string());
+                        row(
+                            "passes",
+                            if s.preview {
+                                "quick preview".to_string()
+                            } else {
+                                st.passes.to_string()
+                            },
+                        );
                         row("photons emitted", st.photons_emitted.to_string());
                         row("stored (global)", st.stored_global.to_string());
                         row("stored (caustic)", st.stored_caustic.to_string());
@@ -516,14 +523,13 @@ pub fn image(app: &mut ViewerApp, ui: &mut egui::Ui) {
         let avail = ui.available_size();
         let scale = (avail.x / w).min(avail.y / h).max(0.05);
         let size = egui::vec2(w * scale, h * scale);
-        let resp = ui
-            .centered_and_justified(|ui| {
-                ui.add(
-                    egui::Image::from_texture(egui::load::SizedTexture::new(tex.id(), size))
-                        .sense(egui::Sense::click_and_drag()),
-                )
-            })
-            .inner;
+        // Centre the image; its response rect is exactly the image, so clicks map to pixels.
+        let rect = egui::Rect::from_center_size(ui.available_rect_before_wrap().center(), size);
+        let resp = ui.put(
+            rect,
+            egui::Image::from_texture(egui::load::SizedTexture::new(tex.id(), size))
+                .sense(egui::Sense::click_and_drag()),
+        );
         let to_pixel = |pos: egui::Pos2| -> Option<(u32, u32)> {
             let r = resp.rect;
             let u = (pos.x - r.min.x) / r.width();

@@ -43,6 +43,38 @@ pub struct Snapshot {
     pub warnings: Vec<String>,
     /// Seconds from the `Start` to this snapshot.
     pub since_start: f64,
+    /// A quick low-resolution first image shown right after a change (see [`preview`]).
+    pub preview: bool,
+}
+
+/// Settings of the quick first image after a change: a quarter of the resolution, a
+/// tenth of the photons, no final gathering. It arrives in tens of milliseconds, so the
+/// view answers a change at once; the full-quality passes replace it.
+pub fn preview(settings: &RenderSettings) -> RenderSettings {
+    RenderSettings {
+        width: settings.width.div_ceil(4),
+        height: settings.height.div_ceil(4),
+        photons_per_pass: (settings.photons_per_pass / 10).max(1000),
+        final_gather_rays: 0,
+        ..settings.clone()
+    }
+}
+
+/// Nearest-neighbour upscale of a preview to the full image size.
+fn upscale(img: &Image, width: u32, height: u32) -> Image {
+    let mut pixels = Vec::with_capacity((width * height) as usize);
+    for y in 0..height {
+        let sy = (y as u64 * img.height as u64 / height as u64) as u32;
+        for x in 0..width {
+            let sx = (x as u64 * img.width as u64 / width as u64) as u32;
+            pixels.push(img.get(sx, sy));
+        }
+    }
+    Image {
+        width,
+        height,
+        pixels,
+    }
 }
 
 /// Shared state between the worker and the UI.
@@ -219,15 +251,42 @@ fn run(
                     if generation != current.load(Ordering::SeqCst) {
                         continue; // superseded before it started
                     }
+                    let started = Instant::now();
+                    let preview_settings = preview(&settings);
                     match pool.install(|| RenderSession::new(&scene, settings)) {
                         Ok(mut session) => {
+                            // The quick first image, on the same (already projected) scene.
+                            let mut quick = RenderSession::with_spectral_scene(
+                                session.scene().clone(),
+                                preview_settings,
+                            );
+                            *cancel_slot.lock().unwrap_or_else(PoisonError::into_inner) =
+                                quick.cancel_flag();
+                            let quick_result =
+                                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                                    pool.install(|| quick.run_pass())
+                                }));
+                            if matches!(quick_result, Ok(Ok(())))
+                                && generation == current.load(Ordering::SeqCst)
+                            {
+                                let full = session.settings();
+                                let mut snap = snapshot(&quick, generation, started);
+                                snap.image =
+                                    Arc::new(upscale(&quick.image(), full.width, full.height));
+                                snap.preview = true;
+                                *shared
+                                    .snapshot
+                                    .lock()
+                                    .unwrap_or_else(PoisonError::into_inner) = Some(snap);
+                                repaint();
+                            }
                             session.set_probes(&probes);
                             *cancel_slot.lock().unwrap_or_else(PoisonError::into_inner) =
                                 session.cancel_flag();
                             job = Some(Job {
                                 session,
                                 generation,
-                                started: Instant::now(),
+                                started,
                             });
                         }
                         Err(e) => {
@@ -261,21 +320,7 @@ fn run(
         }));
         match result {
             Ok(Ok(())) => {
-                let s = &j.session;
-                let snap = Snapshot {
-                    generation: j.generation,
-                    image: Arc::new(s.image()),
-                    stats: s.stats().clone(),
-                    memory: s.memory(),
-                    bytes_per_photon: s.bytes_per_photon(),
-                    bins: s.scene().bins(),
-                    wavelengths: s.scene().grid.centers().to_vec(),
-                    srgb_weights: s.scene().grid.srgb_weights().to_vec(),
-                    probes: s.probes().to_vec(),
-                    skipped: s.skipped(),
-                    warnings: s.scene().warnings.clone(),
-                    since_start: j.started.elapsed().as_secs_f64(),
-                };
+                let snap = snapshot(&j.session, j.generation, j.started);
                 if j.generation == current.load(Ordering::SeqCst) {
                     *shared
                         .snapshot
@@ -297,5 +342,23 @@ fn run(
                 repaint();
             }
         }
+    }
+}
+
+fn snapshot(s: &RenderSession, generation: u64, started: Instant) -> Snapshot {
+    Snapshot {
+        generation,
+        image: Arc::new(s.image()),
+        stats: s.stats().clone(),
+        memory: s.memory(),
+        bytes_per_photon: s.bytes_per_photon(),
+        bins: s.scene().bins(),
+        wavelengths: s.scene().grid.centers().to_vec(),
+        srgb_weights: s.scene().grid.srgb_weights().to_vec(),
+        probes: s.probes().to_vec(),
+        skipped: s.skipped(),
+        warnings: s.scene().warnings.clone(),
+        since_start: started.elapsed().as_secs_f64(),
+        preview: false,
     }
 }

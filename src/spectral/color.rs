@@ -128,8 +128,9 @@ pub fn dominant_wavelength(xyz: [f64; 3]) -> Option<f64> {
     let c = super::tables::cmf();
     let best = |target: f64| -> (f64, f64) {
         let mut best = (f64::INFINITY, 0.0);
-        for l in 380..=700 {
-            let l = l as f64;
+        // 0.1 nm steps: near 490 nm the locus turns by ~4° per nm as seen from white.
+        for i in 0..=3200 {
+            let l = 380.0 + i as f64 * 0.1;
             let (lx, ly, lz) = (c.x.eval(l), c.y.eval(l), c.z.eval(l));
             let s = lx + ly + lz;
             let a = (ly / s - D65_XY[1]).atan2(lx / s - D65_XY[0]);
@@ -142,7 +143,7 @@ pub fn dominant_wavelength(xyz: [f64; 3]) -> Option<f64> {
         best
     };
     let (d, l) = best(theta);
-    if d < 1f64.to_radians() {
+    if d < 0.5f64.to_radians() {
         Some(l)
     } else {
         let (_, l) = best(theta + std::f64::consts::PI);
@@ -157,7 +158,7 @@ mod dominant_tests {
     #[test]
     fn dominant_wavelength_of_spectral_colours_and_purples() {
         let c = crate::spectral::tables::cmf();
-        for l in [450.0, 500.0, 550.0, 600.0, 650.0] {
+        for l in [450.0, 487.0, 490.0, 500.0, 550.0, 600.0, 650.0] {
             let xyz = [c.x.eval(l), c.y.eval(l), c.z.eval(l)];
             let d = dominant_wavelength(xyz).unwrap();
             assert!((d - l).abs() <= 1.0, "{l}: {d}");
@@ -165,6 +166,10 @@ mod dominant_tests {
         // Magenta (red + blue) has a complementary (negative) dominant wavelength.
         let magenta = linear_srgb_to_xyz([1.0, 0.0, 1.0]);
         assert!(dominant_wavelength(magenta).unwrap() < 0.0);
+        // An out-of-gamut cyan (a probe on the prism's rainbow) is ~487 nm, not a purple.
+        let cyan = linear_srgb_to_xyz([-0.0244, 0.0423, 0.0618]);
+        let d = dominant_wavelength(cyan).unwrap();
+        assert!((d - 487.0).abs() < 2.0, "{d}");
         assert_eq!(dominant_wavelength([0.0; 3]), None);
         assert_eq!(
             dominant_wavelength(linear_srgb_to_xyz([1.0, 1.0, 1.0])),

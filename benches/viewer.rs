@@ -1,0 +1,109 @@
+//! Viewer responsiveness while rendering (issue #3): run with
+//! `cargo bench --bench viewer` (PRISMAP_BENCH_SECONDS sets the length, default 30).
+//!
+//! Drives the real `ViewerApp` headless through egui_kittest at ~60 Hz on the prism at
+//! 512×512 and prints: UI frame time (CPU time to build the frame; GPU painting is not
+//! included), time from a setting change to the first updated image, and passes per
+//! second of the background worker.
+
+use std::time::{Duration, Instant};
+
+use egui_kittest::Harness;
+use prismap::app::{SceneSource, ViewerApp};
+use prismap::photon::Storage;
+use prismap::render::RenderSettings;
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+fn main() {
+    let seconds: f64 = std::env::var("PRISMAP_BENCH_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(30.0);
+    let settings = RenderSettings {
+        width: 512,
+        height: 512,
+        photons_per_pass: 50_000,
+        storage: Storage::Compact,
+        ..RenderSettings::default()
+    };
+    let ctx = egui::Context::default();
+    let app = ViewerApp::new(&ctx, SceneSource::Builtin("prism".into()), settings, None);
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app);
+    let start = Instant::now();
+    let mut frames = Vec::new();
+    let mut latencies = Vec::new();
+    let mut full_passes = Vec::new(); // (seconds of rendering, passes) per generation
+    let mut change_at = Instant::now();
+    let mut waiting = true;
+    let mut generation_start = Instant::now();
+    let mut last_passes = 0;
+    let mut next_change = Instant::now() + Duration::from_secs(6);
+    while start.elapsed().as_secs_f64() < seconds {
+        let t = Instant::now();
+        h.step();
+        frames.push(t.elapsed().as_secs_f64() * 1e3);
+        let app = h.state();
+        if let Some(s) = &app.snapshot {
+            if waiting {
+                latencies.push(change_at.elapsed().as_secs_f64() * 1e3);
+                waiting = false;
+            }
+            if !s.preview {
+                last_passes = s.stats.passes;
+            }
+        }
+        if Instant::now() >= next_change {
+            full_passes.push((generation_start.elapsed().as_secs_f64(), last_passes));
+            let app = h.state_mut();
+            app.settings.storage = if app.settings.storage == Storage::Compact {
+                Storage::Full
+            } else {
+                Storage::Compact
+            };
+            app.restart();
+            change_at = Instant::now();
+            generation_start = change_at;
+            waiting = true;
+            last_passes = 0;
+            next_change = Instant::now() + Duration::from_secs(6);
+        }
+        let spent = t.elapsed();
+        if spent < Duration::from_millis(16) {
+            std::thread::sleep(Duration::from_millis(16) - spent);
+        }
+    }
+    full_passes.push((generation_start.elapsed().as_secs_f64(), last_passes));
+    let n = frames.len();
+    let med = percentile(&mut frames, 0.5);
+    let p99 = percentile(&mut frames, 0.99);
+    let (secs, passes) = full_passes
+        .iter()
+        .fold((0.0, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
+    println!(
+        "viewer benchmark: prism 512×512, 50 000 photons/pass, 8 final-gather rays, 20 bins, {} worker threads",
+        std::thread::available_parallelism()
+            .map(|n| n.get().saturating_sub(1).max(1))
+            .unwrap_or(1)
+    );
+    println!(
+        "UI frame time over {n} frames: median {med:.2} ms, 99th percentile {p99:.2} ms (target median ≤ 16 ms)"
+    );
+    if !latencies.is_empty() {
+        let lmed = percentile(&mut latencies.clone(), 0.5);
+        let lmax = latencies.iter().cloned().fold(0.0, f64::max);
+        println!(
+            "setting change → first updated image over {} changes: median {lmed:.0} ms, max {lmax:.0} ms (target ≤ 150 ms)",
+            latencies.len()
+        );
+    }
+    println!(
+        "full-quality passes per second: {:.2} ({passes} passes in {secs:.1} s of rendering)",
+        passes as f64 / secs.max(1e-9)
+    );
+}
