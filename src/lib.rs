@@ -19,9 +19,11 @@
 pub mod app;
 pub mod geometry;
 pub mod materials;
+pub mod metrics;
 pub mod output;
 pub mod photon;
 pub mod render;
+pub mod report;
 pub mod sampling;
 pub mod scene;
 pub mod spectral;

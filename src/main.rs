@@ -27,6 +27,8 @@ enum Command {
     View(ViewArgs),
     /// Render a scene headless to PNG or EXR.
     Render(RenderArgs),
+    /// Measure speed against error per bin count and storage (the paper's tables, and more).
+    Report(ReportArgs),
     /// List the built-in scenes and glasses.
     List,
 }
@@ -80,6 +82,12 @@ struct RenderArgs {
     /// Write render statistics as JSON here.
     #[arg(long)]
     stats: Option<PathBuf>,
+    /// A reference EXR: with --error-csv, log PSNR against it after every pass.
+    #[arg(long, requires = "error_csv")]
+    reference: Option<PathBuf>,
+    /// Write "pass,seconds,photons,psnr_db" after every pass (needs --reference).
+    #[arg(long, requires = "reference")]
+    error_csv: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -158,6 +166,51 @@ fn view(args: ViewArgs) -> Result<()> {
     prismap::app::run_native(source, settings, capture, args.probe).map_err(|e| anyhow::anyhow!(e))
 }
 
+#[derive(clap::Args)]
+struct ReportArgs {
+    /// Small images and short runs: under 10 minutes on 2 cores.
+    #[arg(long)]
+    quick: bool,
+    /// Scenes (built-in names or files); default: cornell-box cornell-blackbody prism.
+    #[arg(long, num_args = 1..)]
+    scenes: Vec<String>,
+    /// Folder for report.md, runs.csv, plots and the cached references.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+fn report(args: ReportArgs) -> Result<()> {
+    let scenes = if args.scenes.is_empty() {
+        prismap::report::default_scenes()
+    } else {
+        args.scenes
+    };
+    for s in &scenes {
+        scene::load_any(s)?; // fail before hours of work, with the loader's message
+    }
+    prismap::report::prepare(&args.out)?;
+    let report = prismap::report::Report {
+        exe: std::env::current_exe().context("cannot find this program's path")?,
+        out: args.out.clone(),
+        scenes,
+        plan: if args.quick {
+            prismap::report::Plan::quick()
+        } else {
+            prismap::report::Plan::full()
+        },
+        quick: args.quick,
+    };
+    let start = Instant::now();
+    let runs = report.run()?;
+    eprintln!(
+        "{} runs in {:.1} min → {}",
+        runs.len(),
+        start.elapsed().as_secs_f64() / 60.0,
+        args.out.join("report.md").display()
+    );
+    Ok(())
+}
+
 fn parse_storage(s: &str) -> Result<Storage, String> {
     s.parse()
 }
@@ -179,6 +232,7 @@ fn main() {
     let result = match cli.command {
         Some(Command::View(args)) => view(args),
         Some(Command::Render(args)) => render(args),
+        Some(Command::Report(args)) => report(args),
         Some(Command::List) => {
             list();
             Ok(())
@@ -196,6 +250,7 @@ fn main() {
             );
             match Cli::parse_from(["prismap", "render"]).command {
                 Some(Command::Render(args)) => render(args),
+                Some(Command::Report(args)) => report(args),
                 _ => unreachable!("`prismap render` parses as the render command"),
             }
         }
@@ -271,6 +326,27 @@ fn render(args: RenderArgs) -> Result<()> {
     if let Some(s) = &args.stats {
         check_writable(s, &["json"])?;
     }
+    if let Some(c) = &args.error_csv {
+        check_writable(c, &["csv"])?;
+    }
+    let reference = match &args.reference {
+        Some(r) => {
+            let img = output::read_exr(r)?;
+            if (img.width, img.height) != args.size {
+                bail!(
+                    "{}: reference is {}x{}, the render {}x{}",
+                    r.display(),
+                    img.width,
+                    img.height,
+                    args.size.0,
+                    args.size.1
+                );
+            }
+            Some(img)
+        }
+        None => None,
+    };
+    let mut error_log = String::from("pass,seconds,photons,psnr_db\n");
     if !(args.exposure.is_finite() && args.exposure > 0.0) {
         bail!("--exposure {}: must be finite and > 0", args.exposure);
     }
@@ -325,6 +401,16 @@ fn render(args: RenderArgs) -> Result<()> {
     for _ in 0..passes {
         pool.install(|| session.run_pass())
             .map_err(|_| anyhow::anyhow!("render cancelled"))?;
+        if let Some(r) = &reference {
+            let st = session.stats();
+            error_log += &format!(
+                "{},{:.6},{},{:.4}\n",
+                st.passes,
+                st.photon_seconds + st.gather_seconds,
+                st.photons_emitted,
+                prismap::metrics::psnr(&session.image(), r, args.exposure)
+            );
+        }
         bar.inc(1);
         bar.set_message(format!("{:.2} s/pass", session.stats().last_pass_seconds));
         if let Some(s) = args.seconds
@@ -340,6 +426,11 @@ fn render(args: RenderArgs) -> Result<()> {
     let stats = output::stats_json(&session, &image, total);
     if let Some(path) = &args.stats {
         output::write_json(path, &stats)?;
+    }
+    if let Some(path) = &args.error_csv {
+        output::write_atomic(path, |tmp| {
+            std::fs::write(tmp, &error_log).map_err(|e| e.to_string())
+        })?;
     }
     let st = session.stats();
     let mem = session.memory();

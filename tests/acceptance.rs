@@ -1,6 +1,6 @@
 //! Issue #2's acceptance checks, run on the shipped scenes.
 
-use prismap::output::psnr;
+use prismap::metrics::psnr;
 use prismap::photon::Storage;
 use prismap::render::{RenderSession, RenderSettings};
 use prismap::scene;

@@ -134,30 +134,6 @@ pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), OutputEr
     })
 }
 
-/// PSNR by the paper's equation 6 on [0, 1] display values: 10·log10(MN / Σ(a−b)²) with
-/// the squared differences summed over pixels and averaged over the three channels.
-/// Infinite for identical images.
-pub fn psnr(a: &Image, b: &Image, exposure: f32) -> f64 {
-    assert_eq!(
-        (a.width, a.height),
-        (b.width, b.height),
-        "images must match in size"
-    );
-    let mut sse = 0.0f64;
-    for (p, q) in a.pixels.iter().zip(&b.pixels) {
-        for c in 0..3 {
-            let d = srgb_encode(p[c] * exposure) as f64 - srgb_encode(q[c] * exposure) as f64;
-            sse += d * d / 3.0;
-        }
-    }
-    let mn = a.pixels.len() as f64;
-    if sse == 0.0 {
-        f64::INFINITY
-    } else {
-        10.0 * (mn / sse).log10()
-    }
-}
-
 /// The stats JSON of a finished render (schema in the README).
 pub fn stats_json(
     session: &crate::render::RenderSession,
@@ -206,6 +182,7 @@ pub fn stats_json(
             "total": total_seconds,
         },
         "nonfinite_pixels": nonfinite,
+        "peak_rss_bytes": crate::metrics::peak_rss_bytes(),
         "dropped_samples": session.film().dropped_samples(),
         "skipped": session.skipped(),
         "warnings": session.scene().warnings,
@@ -248,22 +225,5 @@ mod tests {
         });
         assert_eq!(leftovers.count(), 0);
         std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
-    fn psnr_follows_equation_6() {
-        assert_eq!(psnr(&img(0.5), &img(0.5), 1.0), f64::INFINITY);
-        // Every value off by 0.1 in display space → MSE 0.01 → 20 dB.
-        let a = Image {
-            width: 1,
-            height: 1,
-            pixels: vec![[0.0; 3]],
-        };
-        let b = Image {
-            width: 1,
-            height: 1,
-            pixels: vec![[crate::spectral::color::srgb_decode(0.1); 3]],
-        };
-        assert!((psnr(&a, &b, 1.0) - 20.0).abs() < 1e-3);
     }
 }

@@ -137,7 +137,6 @@ pub fn cdf(weights: &[f32]) -> Vec<f32> {
         .collect()
 }
 
-#[cfg(test)]
 pub mod chi2;
 
 #[cfg(test)]

@@ -172,15 +172,24 @@ impl SmitsBins {
                 }
             })
         };
-        let mut best = clamp(mul3(&self.srgb_to_e, t));
-        let mut best_err = self.colour_error(best, t);
-        for (k, inv) in self.inv.iter().enumerate() {
-            let Some(inv) = inv else { continue };
-            let x = clamp(mul3(inv, t));
-            if branch(x) == k && x == clamp_exact(mul3(inv, t)) {
+        // The branch of the colour's coordinates in Smits' own space is almost always the
+        // right one for a smooth flux: try it first, then the others.
+        let naive = mul3(&self.srgb_to_e, t);
+        let k0 = branch(naive.map(|v| v as f32));
+        for k in std::iter::once(k0).chain((0..6).filter(|&k| k != k0)) {
+            let Some(inv) = &self.inv[k] else { continue };
+            let exact = mul3(inv, t);
+            let x = clamp(exact);
+            if branch(x) == k && x == clamp_exact(exact) {
                 // Inside its own branch and non-negative: exact.
                 return x;
             }
+        }
+        // Out of Smits' gamut (or N < 3): the candidate of nearest colour.
+        let mut best = clamp(naive);
+        let mut best_err = self.colour_error(best, t);
+        for inv in self.inv.iter().flatten() {
+            let x = clamp(mul3(inv, t));
             let err = self.colour_error(x, t);
             if err < best_err {
                 best = x;

@@ -1,0 +1,149 @@
+//! Micro-benchmarks of the engine's hot loops: `cargo bench --bench engine`.
+//! Figures are recorded in BENCHMARKS.md.
+
+use std::sync::atomic::AtomicBool;
+
+use divan::{Bencher, black_box, counter::ItemsCount};
+use glam::Vec3;
+use prismap::photon::{PhotonSettings, Storage, trace_photons};
+use prismap::sampling::{Purpose, Rng, uniform_sphere};
+use prismap::scene::{SpectralScene, load_builtin};
+use prismap::spectral::{BinGrid, Role, Spectrum, spd};
+
+fn main() {
+    divan::main();
+}
+
+fn cornell(bins: usize) -> SpectralScene {
+    SpectralScene::new(
+        &load_builtin("cornell-box").unwrap(),
+        BinGrid::with_bins(bins).unwrap(),
+    )
+}
+
+/// Photons emitted and traced (all threads), Cornell box, compact storage.
+#[divan::bench(args = [4, 20, 100], sample_count = 10)]
+fn photons_traced(bencher: Bencher, bins: usize) {
+    let scene = cornell(bins);
+    let settings = PhotonSettings {
+        photons: 50_000,
+        storage: Storage::Compact,
+        max_depth: 32,
+        dispersion_split: 4,
+        caustic_map: true,
+    };
+    let cancel = AtomicBool::new(false);
+    bencher
+        .counter(ItemsCount::new(settings.photons))
+        .bench(|| {
+            trace_photons(&scene, &settings, 1, 1, &cancel)
+                .unwrap()
+                .global
+                .len()
+        });
+}
+
+/// Radius queries on the global map (one thread), full vs compact at 20 bins.
+#[divan::bench(args = [Storage::Full, Storage::Compact], sample_count = 10)]
+fn gather_queries(bencher: Bencher, storage: Storage) {
+    let scene = cornell(20);
+    let settings = PhotonSettings {
+        photons: 100_000,
+        storage,
+        max_depth: 32,
+        dispersion_split: 4,
+        caustic_map: true,
+    };
+    let map = trace_photons(&scene, &settings, 1, 1, &AtomicBool::new(false))
+        .unwrap()
+        .global;
+    let r = map.typical_knn_radius(48, 256).unwrap();
+    let points: Vec<[f32; 3]> = map
+        .positions()
+        .iter()
+        .step_by(97)
+        .take(2000)
+        .copied()
+        .collect();
+    let mut out = vec![0.0f32; 20];
+    bencher
+        .counter(ItemsCount::new(points.len()))
+        .bench_local(|| {
+            let mut n = 0;
+            for p in &points {
+                out.fill(0.0);
+                n += map.gather(&scene.grid, Vec3::from_array(*p), Vec3::Y, r, &mut out);
+            }
+            n
+        });
+}
+
+/// Closest-hit rays through the CWBVH (one thread), incoherent directions from the box centre.
+#[divan::bench(sample_count = 10)]
+fn bvh_rays(bencher: Bencher) {
+    let scene = cornell(4);
+    let mut rng = Rng::stream(1, 0, 0, Purpose::Photon);
+    let rays: Vec<(Vec3, Vec3)> = (0..10_000)
+        .map(|_| {
+            let o = Vec3::new(278.0, 274.0, 279.0)
+                + 200.0 * (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5);
+            (o, uniform_sphere(rng.next_2d()))
+        })
+        .collect();
+    bencher
+        .counter(ItemsCount::new(rays.len()))
+        .bench_local(|| {
+            rays.iter()
+                .filter(|(o, d)| scene.accel.intersect(*o, *d, f32::INFINITY).is_some())
+                .count()
+        });
+}
+
+fn fluxes(n: usize) -> (BinGrid, Vec<Vec<f32>>) {
+    let g = BinGrid::with_bins(n).unwrap();
+    let light = g.project(&Spectrum::Illuminant([17.0, 12.0, 4.0]), Role::Emission);
+    let fluxes = [[0.73, 0.73, 0.73], [0.63, 0.065, 0.05], [0.14, 0.45, 0.091]]
+        .iter()
+        .map(|rgb| {
+            let mut f = light.clone();
+            spd::mul_assign(
+                &mut f,
+                &g.project(&Spectrum::Reflectance(*rgb), Role::Reflectance),
+            );
+            f
+        })
+        .collect();
+    (g, fluxes)
+}
+
+/// Compaction of one smooth flux into its Smits triplet (ns per photon).
+#[divan::bench(args = [4, 5, 6, 8, 10, 20, 100])]
+fn compact_encode(bencher: Bencher, n: usize) {
+    let (g, fluxes) = fluxes(n);
+    let smits = g.smits().unwrap();
+    bencher
+        .counter(ItemsCount::new(fluxes.len()))
+        .bench_local(|| {
+            fluxes
+                .iter()
+                .map(|f| smits.encode(black_box(f))[0])
+                .sum::<f32>()
+        });
+}
+
+/// Expansion of one triplet to N bins (ns per photon, the per-photon cost without branch sums).
+#[divan::bench(args = [4, 5, 6, 8, 10, 20, 100])]
+fn compact_decode(bencher: Bencher, n: usize) {
+    let (g, fluxes) = fluxes(n);
+    let smits = g.smits().unwrap();
+    let triplets: Vec<[f32; 3]> = fluxes.iter().map(|f| smits.encode(f)).collect();
+    let mut out = vec![0.0f32; n];
+    bencher
+        .counter(ItemsCount::new(triplets.len()))
+        .bench_local(|| {
+            for t in &triplets {
+                smits.decode_into(black_box(*t), &mut out);
+            }
+            out[0]
+        });
+}
