@@ -31,6 +31,7 @@ fn photons_traced(bencher: Bencher, bins: usize) {
         max_depth: 32,
         dispersion_split: 4,
         caustic_map: true,
+        max_map_bytes: usize::MAX,
     };
     let cancel = AtomicBool::new(false);
     bencher
@@ -53,6 +54,7 @@ fn gather_queries(bencher: Bencher, storage: Storage) {
         max_depth: 32,
         dispersion_split: 4,
         caustic_map: true,
+        max_map_bytes: usize::MAX,
     };
     let map = trace_photons(&scene, &settings, 1, 1, &AtomicBool::new(false))
         .unwrap()

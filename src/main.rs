@@ -73,6 +73,10 @@ struct RenderArgs {
     /// First-pass gather radius of the caustic map, in scene units (default: estimated).
     #[arg(long)]
     caustic_radius: Option<f32>,
+    /// Most megabytes one pass's photon maps may take (default: a quarter of RAM);
+    /// photons per pass are lowered to fit.
+    #[arg(long)]
+    photon_budget: Option<f64>,
     /// Exposure multiplier for the PNG (EXR is written linear, unscaled).
     #[arg(long, default_value_t = 1.0)]
     exposure: f32,
@@ -377,6 +381,11 @@ fn render(args: RenderArgs) -> Result<()> {
         dispersion_split: args.split,
         global_radius: args.global_radius,
         caustic_radius: args.caustic_radius,
+        photon_budget_bytes: match args.photon_budget {
+            Some(mb) if mb.is_finite() && mb > 0.0 && mb < 1e12 => Some((mb * 1e6) as usize),
+            Some(mb) => bail!("--photon-budget {mb}: must be a positive number of megabytes"),
+            None => None,
+        },
         ..RenderSettings::default()
     };
     for w in &scene.warnings {

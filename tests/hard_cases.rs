@@ -367,3 +367,48 @@ fn glass_only_scene_without_light_is_refused_and_negative_light_too() {
     r.run_pass().unwrap();
     assert!(r.image().pixels.iter().all(|p| *p == [0.0; 3]));
 }
+
+#[test]
+fn photon_maps_never_exceed_the_budget_and_photons_adapt() {
+    let s = scene::load_builtin("cornell-box").unwrap();
+    let budget = 300_000;
+    for storage in [Storage::Full, Storage::Compact] {
+        let settings = RenderSettings {
+            photons_per_pass: 100_000,
+            photon_budget_bytes: Some(budget),
+            ..small(storage, 100)
+        };
+        let mut r = RenderSession::new(&s, settings).unwrap();
+        for _ in 0..3 {
+            r.run_pass().unwrap();
+            assert!(
+                r.memory().photon_maps <= budget,
+                "{storage:?}: {} > {budget}",
+                r.memory().photon_maps
+            );
+            assert!(r.stats().photons_last_pass < 100_000);
+        }
+        assert!(
+            r.skipped()
+                .iter()
+                .any(|n| n.contains("photons per pass lowered")),
+            "{:?}",
+            r.skipped()
+        );
+        println!(
+            "{storage:?}: {} photons per pass fit {budget} bytes",
+            r.stats().photons_last_pass
+        );
+    }
+    // A budget below the minimum is refused with its field named.
+    let bad = RenderSettings {
+        photon_budget_bytes: Some(10),
+        ..small(Storage::Compact, 8)
+    };
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("photon_budget_bytes")
+    );
+}

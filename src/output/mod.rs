@@ -175,6 +175,7 @@ pub fn stats_json(
             "bvh": mem.bvh,
         },
         "bytes_per_photon": session.bytes_per_photon(),
+        "photons_last_pass": st.photons_last_pass,
         "radius": {"global": st.r_global, "caustic": st.r_caustic},
         "seconds": {
             "photon_pass": st.photon_seconds,

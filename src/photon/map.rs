@@ -62,6 +62,11 @@ impl PhotonBatch {
         }
     }
 
+    /// Bytes these photons will take in a map (records + kd axis byte).
+    pub fn memory_bytes(&self) -> usize {
+        self.headers.len() * (size_of::<PhotonHeader>() + 1) + self.flux.len() * 4
+    }
+
     pub fn append(&mut self, mut other: PhotonBatch) {
         self.headers.append(&mut other.headers);
         self.flux.append(&mut other.flux);

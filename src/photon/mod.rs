@@ -8,4 +8,4 @@ pub mod trace;
 
 pub use map::{PhotonBatch, PhotonMap};
 pub use record::Storage;
-pub use trace::{PhotonPass, PhotonSettings, split_dispersive, trace_photons};
+pub use trace::{PhotonPass, PhotonSettings, TraceStop, split_dispersive, trace_photons};

@@ -11,7 +11,7 @@
 //! bin j with probability S·|I_j ∩ stratum|, so E[flux_j] = Σ/S · S · flux_j/Σ = flux_j.
 //! Split photons carry comparable power (Σ/S), as the paper recommends.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -36,6 +36,9 @@ pub struct PhotonSettings {
     pub dispersion_split: usize,
     /// Build a caustic map (only meaningful when the scene has specular surfaces).
     pub caustic_map: bool,
+    /// Most bytes the pass's photon maps may hold (records + kd-tree); the pass stops
+    /// with [`TraceStop::OverBudget`] as soon as its stored photons pass it.
+    pub max_map_bytes: usize,
 }
 
 /// What one photon pass produced.
@@ -49,6 +52,15 @@ pub struct PhotonPass {
 /// Cancelled by the caller.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Cancelled;
+
+/// Why a photon pass stopped early.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TraceStop {
+    Cancelled,
+    /// The stored photons would exceed `max_map_bytes`. Photons are counted per chunk,
+    /// so at most one chunk per thread is held beyond the budget before the pass stops.
+    OverBudget,
+}
 
 struct Path {
     origin: Vec3,
@@ -79,14 +91,16 @@ pub fn trace_photons(
     seed: u64,
     pass: u64,
     cancel: &AtomicBool,
-) -> Result<PhotonPass, Cancelled> {
+) -> Result<PhotonPass, TraceStop> {
     let n = scene.bins();
     let chunks = settings.photons.div_ceil(CHUNK);
     let caustic = settings.caustic_map && scene.has_specular;
+    let used = AtomicUsize::new(0);
+    let over = AtomicBool::new(false);
     let results: Vec<Option<(PhotonBatch, PhotonBatch, u64)>> = (0..chunks)
         .into_par_iter()
         .map(|c| {
-            if cancel.load(Ordering::Relaxed) {
+            if cancel.load(Ordering::Relaxed) || over.load(Ordering::Relaxed) {
                 return None;
             }
             let mut global = PhotonBatch::new(settings.storage, n);
@@ -105,20 +119,28 @@ pub fn trace_photons(
                     &mut caustics,
                 );
             }
+            let bytes = global.memory_bytes() + caustics.memory_bytes();
+            if used.fetch_add(bytes, Ordering::Relaxed) + bytes > settings.max_map_bytes {
+                over.store(true, Ordering::Relaxed);
+                return None;
+            }
             Some((global, caustics, splits))
         })
         .collect();
+    if over.load(Ordering::Relaxed) {
+        return Err(TraceStop::OverBudget);
+    }
     let mut global = PhotonBatch::new(settings.storage, n);
     let mut caustics = PhotonBatch::new(settings.storage, n);
     let mut splits = 0;
     for r in results {
-        let (g, c, s) = r.ok_or(Cancelled)?;
+        let (g, c, s) = r.ok_or(TraceStop::Cancelled)?;
         global.append(g);
         caustics.append(c);
         splits += s;
     }
     if cancel.load(Ordering::Relaxed) {
-        return Err(Cancelled);
+        return Err(TraceStop::Cancelled);
     }
     let (global, caustic_map) = rayon::join(
         || PhotonMap::build(global),

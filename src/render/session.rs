@@ -15,7 +15,8 @@ use rayon::prelude::*;
 
 use super::film::{Film, Image};
 use super::gather::{Gather, Scratch};
-use super::settings::{RenderSettings, SettingsError};
+use super::settings::{RenderSettings, SettingsError, default_photon_budget};
+use crate::photon::TraceStop;
 use crate::photon::trace::Cancelled;
 use crate::photon::{PhotonSettings, Storage, trace_photons};
 use crate::sampling::{Purpose, Rng};
@@ -51,6 +52,10 @@ pub struct RenderStats {
     /// Radii used by the latest pass.
     pub r_global: f32,
     pub r_caustic: f32,
+    /// Photons emitted in the latest pass (fewer than asked when the budget required).
+    pub photons_last_pass: u64,
+    /// Why photons per pass were lowered, if they were.
+    pub budget_note: Option<String>,
 }
 
 pub struct RenderSession {
@@ -66,6 +71,8 @@ pub struct RenderSession {
     cancel: Arc<AtomicBool>,
     /// Pixels whose spectra are kept (the probe): the only spectral film memory.
     probes: Vec<Probe>,
+    /// Photon-map bytes per emitted photon in the latest pass (for the budget).
+    bytes_per_emitted: Option<f64>,
 }
 
 /// The accumulated spectrum of one probed pixel.
@@ -119,6 +126,7 @@ impl RenderSession {
             memory,
             cancel: Arc::new(AtomicBool::new(false)),
             probes: Vec::new(),
+            bytes_per_emitted: None,
         }
     }
 
@@ -200,6 +208,9 @@ impl RenderSession {
         if self.settings.final_gather_rays == 0 {
             s.push("final gathering: global map shown directly".to_string());
         }
+        if let Some(note) = &self.stats.budget_note {
+            s.push(note.clone());
+        }
         if self.probes.is_empty() {
             s.push("spectral film: nothing reads per-pixel spectra in this run".to_string());
         }
@@ -212,14 +223,40 @@ impl RenderSession {
         let pass = self.film.passes() + 1;
         let seed = self.settings.seed;
         let scene = &*self.scene;
-        let photon_settings = PhotonSettings {
-            photons: self.settings.photons_per_pass,
-            storage: self.settings.storage,
-            max_depth: self.settings.max_depth.max(1) * 2,
-            dispersion_split: self.settings.dispersion_split,
-            caustic_map: true,
+        // Photons per pass, lowered to fit the photon-map budget: first from the previous
+        // pass's bytes per emitted photon, then by halving if a pass still overruns.
+        let budget = self
+            .settings
+            .photon_budget_bytes
+            .unwrap_or_else(default_photon_budget);
+        let asked = self.settings.photons_per_pass;
+        let mut photons = match self.bytes_per_emitted {
+            Some(b) if b > 0.0 => asked.min((budget as f64 / (1.1 * b)) as usize).max(1),
+            _ => asked,
         };
-        let maps = trace_photons(scene, &photon_settings, seed, pass, &self.cancel)?;
+        let maps = loop {
+            let photon_settings = PhotonSettings {
+                photons,
+                storage: self.settings.storage,
+                max_depth: self.settings.max_depth.max(1) * 2,
+                dispersion_split: self.settings.dispersion_split,
+                caustic_map: true,
+                max_map_bytes: budget,
+            };
+            match trace_photons(scene, &photon_settings, seed, pass, &self.cancel) {
+                Ok(m) => break m,
+                Err(TraceStop::Cancelled) => return Err(Cancelled),
+                Err(TraceStop::OverBudget) if photons > 1 => photons /= 2,
+                Err(TraceStop::OverBudget) => return Err(Cancelled),
+            }
+        };
+        self.stats.budget_note = (photons < asked).then(|| {
+            format!(
+                "photons per pass lowered from {asked} to {photons}: the photon maps must fit the budget of {:.1} MB",
+                budget as f64 / 1e6
+            )
+        });
+        self.stats.photons_last_pass = photons as u64;
         let photon_done = Instant::now();
 
         // First-pass radii: from the photons themselves unless the settings fix them.
@@ -331,6 +368,7 @@ impl RenderSession {
         self.memory.global_map = maps.global.memory_bytes();
         self.memory.caustic_map = maps.caustic.as_ref().map_or(0, |c| c.memory_bytes());
         self.memory.photon_maps = self.memory.global_map + self.memory.caustic_map;
+        self.bytes_per_emitted = Some(self.memory.photon_maps as f64 / photons.max(1) as f64);
         // Knaus & Zwicker: r²ₖ₊₁ = r²ₖ (k + α) / (k + 1), kept in f64.
         let kf = pass as f64;
         self.radius_sq_factor *= (kf + self.settings.alpha) / (kf + 1.0);

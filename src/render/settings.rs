@@ -31,6 +31,24 @@ pub struct RenderSettings {
     pub caustic_k: usize,
     /// Most single-bin photons one photon splits into at dispersive glass.
     pub dispersion_split: usize,
+    /// Most bytes one pass's photon maps may take; None: a quarter of the machine's RAM.
+    /// Photons per pass are lowered to fit (and the stats say so).
+    pub photon_budget_bytes: Option<usize>,
+}
+
+/// Smallest photon budget accepted.
+pub const MIN_PHOTON_BUDGET: usize = 64 * 1024;
+
+/// A quarter of the machine's memory (Linux /proc/meminfo), else 4 GiB.
+pub fn default_photon_budget() -> usize {
+    std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|s| {
+            let line = s.lines().find(|l| l.starts_with("MemTotal:"))?;
+            let kb: usize = line.split_whitespace().nth(1)?.parse().ok()?;
+            Some(kb * 1024 / 4)
+        })
+        .unwrap_or(4 << 30)
 }
 
 impl Default for RenderSettings {
@@ -52,6 +70,7 @@ impl Default for RenderSettings {
             global_k: 48,
             caustic_k: 24,
             dispersion_split: 4,
+            photon_budget_bytes: None,
         }
     }
 }
@@ -155,6 +174,15 @@ impl RenderSettings {
                 "dispersion_split",
                 self.dispersion_split,
                 format!("must be between 1 and {MAX_BINS}"),
+            ));
+        }
+        if let Some(b) = self.photon_budget_bytes
+            && b < MIN_PHOTON_BUDGET
+        {
+            return Err(out_of_range(
+                "photon_budget_bytes",
+                b,
+                format!("must be at least {MIN_PHOTON_BUDGET}"),
             ));
         }
         self.grid().map(|_| ()).map_err(SettingsError::from)
