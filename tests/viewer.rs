@@ -213,3 +213,26 @@ fn viewer_image_after_n_passes_equals_the_engines() {
         "the viewer renders exactly what `prismap render` renders"
     );
 }
+
+#[test]
+fn the_viewer_renders_with_wgpu_headless() {
+    // egui_kittest's wgpu renderer: Mesa's software Vulkan (mesa-vulkan-drivers), no display.
+    let ctx = egui::Context::default();
+    let app = ViewerApp::new(&ctx, SceneSource::Builtin("prism".into()), settings(), None);
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1000.0, 700.0))
+        .wgpu()
+        .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app);
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    h.step();
+    let img = h.render().expect("wgpu renders headless");
+    assert_eq!((img.width(), img.height()), (1000, 700));
+    let mut colours: Vec<[u8; 4]> = img.pixels().map(|p| p.0).collect();
+    colours.sort();
+    colours.dedup();
+    assert!(
+        colours.len() > 50,
+        "only {} colours: nothing drawn?",
+        colours.len()
+    );
+}

@@ -97,6 +97,8 @@ pub struct ViewerApp {
     capture_error: Arc<Mutex<Option<String>>>,
     scene_files: Vec<PathBuf>,
     path_input: String,
+    /// An open-file dialog running on its own thread (the UI never waits on it).
+    file_dialog: Option<std::sync::mpsc::Receiver<Option<PathBuf>>>,
     started: Instant,
     /// When the last setting changed, and how long until its first image arrived.
     changed_at: Instant,
@@ -152,6 +154,7 @@ impl ViewerApp {
             capture_error: Arc::new(Mutex::new(None)),
             scene_files: list_scene_files(Path::new("scenes")),
             path_input: String::new(),
+            file_dialog: None,
             started: Instant::now(),
             changed_at: Instant::now(),
             first_image_latency: None,
@@ -217,6 +220,47 @@ impl ViewerApp {
     /// Stop refining after `passes` passes (None: refine until paused).
     pub fn stop_after(&self, passes: Option<u64>) {
         self.worker.send(Command::StopAfter(passes));
+    }
+
+    /// Opens the system's file dialog on a thread; the choice is picked up by `ui`.
+    pub fn open_dialog(&mut self, ctx: &egui::Context) {
+        if self.file_dialog.is_some() {
+            return;
+        }
+        let (tx, rx) = std::sync::mpsc::channel();
+        let ctx = ctx.clone();
+        let spawned = std::thread::Builder::new()
+            .name("prismap-open".into())
+            .spawn(move || {
+                let choice = rfd::FileDialog::new()
+                    .add_filter("glTF scene", &["gltf", "glb"])
+                    .set_directory(std::env::current_dir().unwrap_or_default())
+                    .pick_file();
+                let _ = tx.send(choice);
+                ctx.request_repaint();
+            });
+        match spawned {
+            Ok(_) => self.file_dialog = Some(rx),
+            Err(e) => self.status = format!("cannot open a file dialog: {e}"),
+        }
+    }
+
+    fn poll_dialog(&mut self) {
+        let Some(rx) = &self.file_dialog else { return };
+        match rx.try_recv() {
+            Ok(Some(path)) => {
+                self.file_dialog = None;
+                self.open(SceneSource::File(path));
+            }
+            Ok(None) => {
+                self.file_dialog = None;
+                self.status =
+                    "no file chosen (no file dialog on this system? type a path or drop a file)"
+                        .to_string();
+            }
+            Err(std::sync::mpsc::TryRecvError::Empty) => {}
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => self.file_dialog = None,
+        }
     }
 
     pub fn set_paused(&mut self, paused: bool) {
@@ -388,6 +432,7 @@ impl ViewerApp {
     pub fn ui(&mut self, ui: &mut egui::Ui) {
         let ctx = ui.ctx().clone();
         self.poll(&ctx);
+        self.poll_dialog();
         // Scenes dropped on the window.
         let dropped: Vec<PathBuf> = ctx.input(|i| {
             i.raw

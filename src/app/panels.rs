@@ -41,10 +41,14 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     ui.add(
                         egui::TextEdit::singleline(&mut app.path_input)
                             .hint_text("path/to/scene.gltf")
-                            .desired_width(170.0),
+                            .desired_width(130.0),
                     );
                     if ui.button("Open").clicked() && !app.path_input.trim().is_empty() {
                         open = Some(SceneSource::File(app.path_input.trim().into()));
+                    }
+                    if ui.button("Browse…").clicked() {
+                        let ctx = ui.ctx().clone();
+                        app.open_dialog(&ctx);
                     }
                 });
                 ui.small("…or drop a .gltf/.glb on the window");
