@@ -75,6 +75,11 @@ pub struct RenderSession {
     bytes_per_emitted: Option<f64>,
 }
 
+/// Fault injection for reliability tests: while set, every pass panics. Process-wide and
+/// never set by the program itself; only the viewer's panic-recovery test uses it.
+#[doc(hidden)]
+pub static INJECT_PANIC: AtomicBool = AtomicBool::new(false);
+
 /// The accumulated spectrum of one probed pixel.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Probe {
@@ -219,6 +224,9 @@ impl RenderSession {
 
     /// Runs one pass; on cancel the film is unchanged.
     pub fn run_pass(&mut self) -> Result<(), Cancelled> {
+        if INJECT_PANIC.load(Ordering::Relaxed) {
+            panic!("injected fault (test)");
+        }
         let start = Instant::now();
         let pass = self.film.passes() + 1;
         let seed = self.settings.seed;

@@ -445,6 +445,13 @@ fn read_material(
         };
         ior.validate(360.0, 830.0)
             .map_err(|e| ctx.err(&element, e.to_string()))?;
+        if let Some(v) = m.volume()
+            && (v.attenuation_distance().is_finite() || v.attenuation_color() != [1.0; 3])
+        {
+            warnings.push(format!(
+                "{element} '{name}': KHR_materials_volume attenuation is not rendered (clear glass)"
+            ));
+        }
         MaterialKind::Dielectric { ior }
     } else if pbr.metallic_factor() >= 0.99 && pbr.roughness_factor() <= 0.05 {
         MaterialKind::Mirror {

@@ -9,7 +9,7 @@
 mod gltf_load;
 mod spectral;
 
-pub use gltf_load::{load, load_from_slice};
+pub use gltf_load::{load, load_from_slice, parse_spd_csv};
 pub use spectral::{Light, LightKind, SMaterial, SpectralScene, SurfaceKind, TriData};
 
 use crate::spectral::{IorModel, Spectrum};
