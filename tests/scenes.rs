@@ -241,16 +241,40 @@ fn measured_spd_csv_shapes_an_emitter_and_bad_tables_are_named() {
     // Parsing: header and comment skipped; unsorted, duplicate, negative, short rejected.
     let t = parse_spd_csv("# lamp\nwavelength_nm,value\n400,1\n500,2\n600,0.5\n").unwrap();
     assert_eq!(t.xs(), &[400.0, 500.0, 600.0]);
-    assert!(parse_spd_csv("400,1\n390,2\n").unwrap_err().contains("increase"));
-    assert!(parse_spd_csv("400,1\n400,2\n").unwrap_err().contains("increase"));
-    assert!(parse_spd_csv("400,1\n500,-2\n").unwrap_err().contains("negative"));
+    assert!(
+        parse_spd_csv("400,1\n390,2\n")
+            .unwrap_err()
+            .contains("increase")
+    );
+    assert!(
+        parse_spd_csv("400,1\n400,2\n")
+            .unwrap_err()
+            .contains("increase")
+    );
+    assert!(
+        parse_spd_csv("400,1\n500,-2\n")
+            .unwrap_err()
+            .contains("negative")
+    );
     assert!(parse_spd_csv("400,1\n").is_err());
-    assert!(parse_spd_csv("400,1,3\n500,2,3\n").unwrap_err().contains("columns"));
-    assert!(parse_spd_csv("400,abc\n500,1\n").unwrap_err().contains("abc"));
+    assert!(
+        parse_spd_csv("400,1,3\n500,2,3\n")
+            .unwrap_err()
+            .contains("columns")
+    );
+    assert!(
+        parse_spd_csv("400,abc\n500,1\n")
+            .unwrap_err()
+            .contains("abc")
+    );
     // Through the loader: the Cornell light with a measured spike-ish lamp.
     let dir = std::env::temp_dir().join(format!("prismap-spd-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("lamp.csv"), "wavelength_nm,value\n540,0\n545,10\n550,0\n").unwrap();
+    std::fs::write(
+        dir.join("lamp.csv"),
+        "wavelength_nm,value\n540,0\n545,10\n550,0\n",
+    )
+    .unwrap();
     let text = cornell_text().replace(
         "\"name\": \"light\",",
         "\"name\": \"light\", \"extras\": {\"prismap\": {\"emission\": {\"spd_csv\": \"lamp.csv\"}}},",
@@ -264,8 +288,14 @@ fn measured_spd_csv_shapes_an_emitter_and_bad_tables_are_named() {
     assert_eq!(e.eval(600.0), 0.0);
     assert!(e.eval(545.0) > 0.0);
     // A missing CSV names the field and the file.
-    std::fs::write(dir.join("missing.gltf"), text.replace("lamp.csv", "nope.csv")).unwrap();
-    let err = scene::load(&dir.join("missing.gltf")).unwrap_err().to_string();
+    std::fs::write(
+        dir.join("missing.gltf"),
+        text.replace("lamp.csv", "nope.csv"),
+    )
+    .unwrap();
+    let err = scene::load(&dir.join("missing.gltf"))
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("spd_csv") && err.contains("nope.csv"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -278,8 +308,11 @@ fn fuzzer_crash_inputs_are_errors_not_panics() {
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
         let bytes = std::fs::read(&path).unwrap();
-        let result = std::panic::catch_unwind(|| scene::load_from_slice(&bytes, "crash.gltf", None));
-        let err = result.expect("no panic escapes the loader").expect_err("malformed input is an error");
+        let result =
+            std::panic::catch_unwind(|| scene::load_from_slice(&bytes, "crash.gltf", None));
+        let err = result
+            .expect("no panic escapes the loader")
+            .expect_err("malformed input is an error");
         assert!(err.to_string().starts_with("crash.gltf"), "{err}");
         n += 1;
     }

@@ -105,38 +105,10 @@ impl Gather<'_> {
                     }
                     return;
                 }
-                SurfaceKind::Mirror { reflectance } => {
-                    spd::mul_assign(&mut s.throughput, reflectance);
-                    dir = reflect(dir, nf);
-                    origin = scene.accel.offset(p, nf, dir);
-                }
-                SurfaceKind::Dielectric { eta, dispersive } => {
-                    let e = match (dispersive, spd::single_nonzero(&s.throughput)) {
-                        (_, Some(bin)) => eta[bin],
-                        (false, None) => eta[0],
-                        (true, None) => {
-                            // Pick one bin ∝ throughput; weight 1/p keeps it unbiased.
-                            let Some(bin) = pick_bin(&s.throughput, rng.next_f32()) else {
-                                return;
-                            };
-                            let total = spd::sum(&s.throughput);
-                            s.throughput.fill(0.0);
-                            s.throughput[bin] = total;
-                            eta[bin]
-                        }
-                    };
-                    let ev = scatter_dielectric(dir, n, e, rng.next_f32());
-                    if ev.transmitted {
-                        // Radiance crossing into a denser medium is compressed: (ηi/ηt)².
-                        let k = ev.eta_ratio * ev.eta_ratio;
-                        spd::scale(&mut s.throughput, 1.0 / k);
-                    }
-                    dir = ev.dir;
-                    origin = scene.accel.offset(p, n, dir);
-                }
-            }
-            if !(spd::max(&s.throughput) > 0.0) {
-                return;
+                kind => match self.specular_bounce(kind, p, n, dir, &mut s.throughput, rng) {
+                    Some((o, d)) => (origin, dir) = (o, d),
+                    None => return,
+                },
             }
         }
     }
@@ -221,34 +193,55 @@ impl Gather<'_> {
                     spd::scale(out, std::f32::consts::FRAC_1_PI);
                     return;
                 }
-                SurfaceKind::Mirror { reflectance } => {
-                    spd::mul_assign(t, reflectance);
-                    dir = reflect(dir, nf);
-                    origin = scene.accel.offset(p, nf, dir);
-                }
-                SurfaceKind::Dielectric { eta, dispersive } => {
-                    let e = match (dispersive, spd::single_nonzero(t)) {
-                        (_, Some(bin)) => eta[bin],
-                        (false, None) => eta[0],
-                        (true, None) => {
-                            let Some(bin) = pick_bin(t, rng.next_f32()) else {
-                                return;
-                            };
-                            let total = spd::sum(t);
-                            t.fill(0.0);
-                            t[bin] = total;
-                            eta[bin]
-                        }
-                    };
-                    let ev = scatter_dielectric(dir, n, e, rng.next_f32());
-                    if ev.transmitted {
-                        spd::scale(t, 1.0 / (ev.eta_ratio * ev.eta_ratio));
-                    }
-                    dir = ev.dir;
-                    origin = scene.accel.offset(p, n, dir);
-                }
+                kind => match self.specular_bounce(kind, p, n, dir, t, rng) {
+                    Some((o, d)) => (origin, dir) = (o, d),
+                    None => return,
+                },
             }
         }
+    }
+
+    /// Continues a radiance path through a mirror or glass hit: updates the throughput
+    /// `t` (at dispersive glass one bin is picked ∝ throughput, weight 1/p, so the
+    /// estimate stays unbiased; a transmitted ray's radiance scales by (ηi/ηt)²) and
+    /// returns the new ray, or None when the path ends.
+    fn specular_bounce(
+        &self,
+        kind: &SurfaceKind,
+        p: Vec3,
+        n: Vec3,
+        dir: Vec3,
+        t: &mut [f32],
+        rng: &mut Rng,
+    ) -> Option<(Vec3, Vec3)> {
+        let nf = if dir.dot(n) < 0.0 { n } else { -n };
+        let next = match kind {
+            SurfaceKind::Diffuse { .. } => return None,
+            SurfaceKind::Mirror { reflectance } => {
+                spd::mul_assign(t, reflectance);
+                let d = reflect(dir, nf);
+                (self.scene.accel.offset(p, nf, d), d)
+            }
+            SurfaceKind::Dielectric { eta, dispersive } => {
+                let e = match (dispersive, spd::single_nonzero(t)) {
+                    (_, Some(bin)) => eta[bin],
+                    (false, None) => eta[0],
+                    (true, None) => {
+                        let bin = pick_bin(t, rng.next_f32())?;
+                        let total = spd::sum(t);
+                        t.fill(0.0);
+                        t[bin] = total;
+                        eta[bin]
+                    }
+                };
+                let ev = scatter_dielectric(dir, n, e, rng.next_f32());
+                if ev.transmitted {
+                    spd::scale(t, 1.0 / (ev.eta_ratio * ev.eta_ratio));
+                }
+                (self.scene.accel.offset(p, n, ev.dir), ev.dir)
+            }
+        };
+        (spd::max(t) > 0.0).then_some(next)
     }
 
     /// Irradiance estimate (N bins) from a photon map: Σ flux / (π r²), into `out`.
