@@ -194,20 +194,4 @@ impl Spectrum {
             }
         }
     }
-
-    /// Largest value over the visible range, sampled per nm (used to check reflectances).
-    pub fn max_value(&self) -> f64 {
-        (360..=830).map(|l| self.eval(l as f64)).fold(0.0, f64::max)
-    }
-
-    /// Whether the spectrum is zero everywhere.
-    pub fn is_black(&self) -> bool {
-        match self {
-            Self::Constant(c) => *c == 0.0,
-            Self::Reflectance(rgb) | Self::Illuminant(rgb) => clamp_rgb(*rgb) == [0.0; 3],
-            Self::Blackbody { luminance, .. } => *luminance == 0.0,
-            Self::Scaled(k, s) => *k == 0.0 || s.is_black(),
-            Self::Table(t) => t.ys().iter().all(|&v| v == 0.0),
-        }
-    }
 }
