@@ -28,7 +28,7 @@ fn photons_traced(bencher: Bencher, bins: usize) {
     let settings = PhotonSettings {
         photons: 50_000,
         storage: Storage::Compact,
-        max_depth: 32,
+        max_bounces: 1024,
         dispersion_split: 4,
         caustic_map: true,
         max_map_bytes: usize::MAX,
@@ -51,7 +51,7 @@ fn gather_queries(bencher: Bencher, storage: Storage) {
     let settings = PhotonSettings {
         photons: 100_000,
         storage,
-        max_depth: 32,
+        max_bounces: 1024,
         dispersion_split: 4,
         caustic_map: true,
         max_map_bytes: usize::MAX,

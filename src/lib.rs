@@ -18,6 +18,7 @@
 
 pub mod app;
 pub mod geometry;
+pub mod lights;
 pub mod materials;
 pub mod metrics;
 pub mod output;

@@ -74,7 +74,7 @@ fn prism_stores_spikes_and_compact_caustics_equal_full_bit_for_bit() {
             let ps = PhotonSettings {
                 photons: 20_000,
                 storage,
-                max_depth: 32,
+                max_bounces: 1024,
                 dispersion_split: 4,
                 caustic_map: true,
                 max_map_bytes: usize::MAX,

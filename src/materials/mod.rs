@@ -89,6 +89,25 @@ pub fn scatter_dielectric(d: Vec3, n: Vec3, eta: f32, u: f32) -> DielectricEvent
     }
 }
 
+/// Russian roulette on a reflectance: multiplies `t` by ρ, then survives with
+/// p = min(1, Σ(t·ρ)/Σt) and divides by p (unbiased; the path's weight stays near its
+/// size before the bounce). Returns false when the path is absorbed. Shared by the photon
+/// tracer and the gather, so both sides end paths the same way.
+pub fn russian_roulette(t: &mut [f32], reflectance: &[f32], u: f32) -> bool {
+    let before = crate::spectral::spd::sum(t);
+    crate::spectral::spd::mul_assign(t, reflectance);
+    let after = crate::spectral::spd::sum(t);
+    if !(before > 0.0 && after > 0.0) {
+        return false;
+    }
+    let p = (after / before).min(1.0);
+    if u >= p {
+        return false;
+    }
+    crate::spectral::spd::scale(t, 1.0 / p);
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -18,9 +18,11 @@ use rayon::prelude::*;
 
 use super::map::{PhotonBatch, PhotonMap};
 use super::record::Storage;
-use crate::materials::{reflect, scatter_dielectric};
+use crate::lights::spot_falloff;
+use crate::materials::{reflect, russian_roulette, scatter_dielectric};
 use crate::sampling::{
-    Purpose, Rng, cosine_hemisphere, sample_cdf, uniform_cone, uniform_sphere, uniform_triangle,
+    Purpose, Rng, cosine_hemisphere, one_minus_cos_between, sample_cdf, uniform_cone,
+    uniform_sphere, uniform_triangle,
 };
 use crate::scene::{LightKind, SpectralScene, SurfaceKind};
 use crate::spectral::spd;
@@ -32,7 +34,8 @@ const CHUNK: usize = 1024;
 pub struct PhotonSettings {
     pub photons: usize,
     pub storage: Storage,
-    pub max_depth: u32,
+    /// Safety cap on a photon's bounces (Russian roulette ends paths long before).
+    pub max_bounces: u32,
     pub dispersion_split: usize,
     /// Build a caustic map (only meaningful when the scene has specular surfaces).
     pub caustic_map: bool,
@@ -69,19 +72,6 @@ struct Path {
     depth: u32,
     diffuse_seen: bool,
     specular_seen: bool,
-}
-
-/// glTF's spot falloff: smooth (squared linear ramp) between the cone angles, a hard
-/// edge when they coincide. (The glTF sample code clamps the ramp width to 0.001, which
-/// would dim a 1° spotlight a thousandfold.)
-#[inline]
-pub fn spot_falloff(cos: f32, cos_outer: f32, cos_inner: f32) -> f32 {
-    let width = cos_inner - cos_outer;
-    if width <= 0.0 {
-        return if cos >= cos_outer { 1.0 } else { 0.0 };
-    }
-    let t = ((cos - cos_outer) / width).clamp(0.0, 1.0);
-    t * t
 }
 
 /// Traces `settings.photons` photons for pass `pass`.
@@ -170,7 +160,7 @@ fn trace_one(
     let mut splits = 0;
     let mut stack = vec![first];
     while let Some(mut path) = stack.pop() {
-        while path.depth < settings.max_depth {
+        while path.depth < settings.max_bounces {
             let Some(hit) = scene.accel.intersect(path.origin, path.dir, f32::INFINITY) else {
                 break;
             };
@@ -186,7 +176,7 @@ fn trace_one(
                     if caustic && path.specular_seen && !path.diffuse_seen {
                         caustics.push(grid, p, path.dir, &path.flux);
                     }
-                    if !roulette(&mut path.flux, reflectance, rng) {
+                    if !russian_roulette(&mut path.flux, reflectance, rng.next_f32()) {
                         break;
                     }
                     path.diffuse_seen = true;
@@ -194,7 +184,7 @@ fn trace_one(
                     path.origin = scene.accel.offset(p, nf, path.dir);
                 }
                 SurfaceKind::Mirror { reflectance } => {
-                    if !roulette(&mut path.flux, reflectance, rng) {
+                    if !russian_roulette(&mut path.flux, reflectance, rng.next_f32()) {
                         break;
                     }
                     path.specular_seen = true;
@@ -229,24 +219,6 @@ fn trace_one(
         }
     }
     splits
-}
-
-/// Russian roulette on reflectance: survive with p = min(1, Σ(flux·ρ)/Σflux) and scale
-/// the flux by ρ/p, which keeps the photon's power nearly constant and the estimate
-/// unbiased. Returns false when the photon is absorbed.
-fn roulette(flux: &mut [f32], reflectance: &[f32], rng: &mut Rng) -> bool {
-    let before = spd::sum(flux);
-    spd::mul_assign(flux, reflectance);
-    let after = spd::sum(flux);
-    if !(before > 0.0 && after > 0.0) {
-        return false;
-    }
-    let p = (after / before).min(1.0);
-    if rng.next_f32() >= p {
-        return false;
-    }
-    spd::scale(flux, 1.0 / p);
-    true
 }
 
 /// Splits a multi-bin flux into single-bin fluxes (see the module docs).
@@ -317,15 +289,16 @@ fn emit(scene: &SpectralScene, photons: usize, rng: &mut Rng) -> Option<Path> {
         LightKind::Spot {
             position,
             axis,
-            cos_outer,
-            cos_inner,
+            omc_outer,
+            omc_inner,
         } => {
-            let dir = uniform_cone(axis, cos_outer, rng.next_2d());
-            let solid_angle = 2.0 * std::f32::consts::PI * (1.0 - cos_outer);
+            let dir = uniform_cone(axis, omc_outer, rng.next_2d());
+            let solid_angle = 2.0 * std::f32::consts::PI * omc_outer;
+            let omc = one_minus_cos_between(dir, axis);
             (
                 position,
                 dir,
-                solid_angle * spot_falloff(dir.dot(axis), cos_outer, cos_inner),
+                solid_angle * spot_falloff(omc, omc_outer, omc_inner),
             )
         }
     };
@@ -391,18 +364,5 @@ mod tests {
                 "{m} vs {f} (σ {sigma})"
             );
         }
-    }
-
-    #[test]
-    fn spot_falloff_is_bounded() {
-        let (co, ci) = (0.9f32, 0.95f32);
-        assert_eq!(spot_falloff(1.0, co, ci), 1.0);
-        assert_eq!(spot_falloff(0.8, co, ci), 0.0);
-        assert!((spot_falloff(0.925, co, ci) - 0.25).abs() < 1e-4);
-        assert_eq!(spot_falloff(0.5, 0.5, 0.5), 1.0);
-        assert_eq!(spot_falloff(0.4, 0.5, 0.5), 0.0);
-        // A half-degree spotlight keeps its full intensity on its axis.
-        let (co, ci) = (0.5f32.to_radians().cos(), 0.4f32.to_radians().cos());
-        assert_eq!(spot_falloff(1.0, co, ci), 1.0);
     }
 }

@@ -5,10 +5,12 @@
 
 use glam::Vec3;
 
-use crate::materials::{reflect, scatter_dielectric};
+use crate::lights::spot_falloff;
+use crate::materials::{reflect, russian_roulette, scatter_dielectric};
 use crate::photon::PhotonMap;
-use crate::photon::trace::spot_falloff;
-use crate::sampling::{Rng, cosine_hemisphere, sample_cdf, uniform_triangle};
+use crate::sampling::{
+    Rng, cosine_hemisphere, one_minus_cos_between, sample_cdf, uniform_triangle,
+};
 use crate::scene::{LightKind, SpectralScene, SurfaceKind};
 use crate::spectral::spd;
 
@@ -20,7 +22,8 @@ pub struct Gather<'a> {
     pub r_global: f32,
     pub r_caustic: f32,
     pub final_gather_rays: u32,
-    pub max_depth: u32,
+    /// Safety cap on a path's specular bounces (Russian roulette ends paths first).
+    pub max_bounces: u32,
 }
 
 /// Per-thread buffers of N bins (the result never depends on their prior content).
@@ -81,7 +84,7 @@ impl Gather<'_> {
     ) {
         let scene = self.scene;
         s.throughput.fill(1.0);
-        for _ in 0..self.max_depth {
+        for _ in 0..self.max_bounces {
             let Some(hit) = scene.accel.intersect(origin, dir, f32::INFINITY) else {
                 return;
             };
@@ -176,7 +179,7 @@ impl Gather<'_> {
         let scene = self.scene;
         out.fill(0.0);
         t.fill(1.0);
-        for _ in 0..self.max_depth {
+        for _ in 0..self.max_bounces {
             let Some(hit) = scene.accel.intersect(origin, dir, f32::INFINITY) else {
                 return;
             };
@@ -202,9 +205,16 @@ impl Gather<'_> {
     }
 
     /// Continues a radiance path through a mirror or glass hit: updates the throughput
-    /// `t` (at dispersive glass one bin is picked ∝ throughput, weight 1/p, so the
-    /// estimate stays unbiased; a transmitted ray's radiance scales by (ηi/ηt)²) and
-    /// returns the new ray, or None when the path ends.
+    /// `t` and returns the new ray, or None when the path ends.
+    ///
+    /// - At dispersive glass one bin is picked ∝ throughput, weight 1/p, so the estimate
+    ///   stays unbiased.
+    /// - A transmitted ray's throughput scales by (ηi/ηt)², ηi on the side the ray comes
+    ///   from: radiance/η² is what is conserved across an interface, so radiance in glass
+    ///   seen from air is divided by n² (pbrt-v4's `ft /= Sqr(etap)` in radiance mode).
+    ///   Photons carry flux, which is not scaled (importance transport).
+    /// - At a mirror, Russian roulette on the reflectance (as the photon tracer does)
+    ///   keeps the throughput's size, so paths end by absorption rather than by a cap.
     fn specular_bounce(
         &self,
         kind: &SurfaceKind,
@@ -218,7 +228,9 @@ impl Gather<'_> {
         let next = match kind {
             SurfaceKind::Diffuse { .. } => return None,
             SurfaceKind::Mirror { reflectance } => {
-                spd::mul_assign(t, reflectance);
+                if !russian_roulette(t, reflectance, rng.next_f32()) {
+                    return None;
+                }
                 let d = reflect(dir, nf);
                 (self.scene.accel.offset(p, nf, d), d)
             }
@@ -236,7 +248,7 @@ impl Gather<'_> {
                 };
                 let ev = scatter_dielectric(dir, n, e, rng.next_f32());
                 if ev.transmitted {
-                    spd::scale(t, 1.0 / (ev.eta_ratio * ev.eta_ratio));
+                    spd::scale(t, ev.eta_ratio * ev.eta_ratio);
                 }
                 (self.scene.accel.offset(p, n, ev.dir), ev.dir)
             }
@@ -283,12 +295,13 @@ impl Gather<'_> {
             LightKind::Spot {
                 position,
                 axis,
-                cos_outer,
-                cos_inner,
+                omc_outer,
+                omc_inner,
             } => {
                 let w = p - position;
                 let d2 = w.length_squared();
-                let f = spot_falloff((w / d2.sqrt()).dot(axis), cos_outer, cos_inner);
+                let omc = one_minus_cos_between(w / d2.sqrt(), axis);
+                let f = spot_falloff(omc, omc_outer, omc_inner);
                 if f <= 0.0 {
                     return;
                 }

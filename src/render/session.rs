@@ -246,7 +246,7 @@ impl RenderSession {
             let photon_settings = PhotonSettings {
                 photons,
                 storage: self.settings.storage,
-                max_depth: self.settings.max_depth.max(1) * 2,
+                max_bounces: self.settings.max_bounces,
                 dispersion_split: self.settings.dispersion_split,
                 caustic_map: true,
                 max_map_bytes: budget,
@@ -298,7 +298,7 @@ impl RenderSession {
             r_global,
             r_caustic,
             final_gather_rays: self.settings.final_gather_rays,
-            max_depth: self.settings.max_depth,
+            max_bounces: self.settings.max_bounces,
         };
         let (w, h) = (self.settings.width, self.settings.height);
         let n = scene.bins();

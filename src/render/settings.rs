@@ -19,7 +19,11 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Final-gather rays per pixel per pass; 0 shows the global map directly.
     pub final_gather_rays: u32,
-    pub max_depth: u32,
+    /// Safety cap on the bounces of any path, photon or camera. Paths end by Russian
+    /// roulette on the reflectance (unbiased); the cap only stops paths that lose no energy
+    /// (light trapped by total internal reflection, lossless mirrors). At the default 1024
+    /// a surface of albedo 0.99 has ρ¹⁰²⁴ = 3·10⁻⁵ of its light left: nothing visible is cut.
+    pub max_bounces: u32,
     /// Progressive radius reduction α of Knaus & Zwicker (2011): r²ₖ₊₁ = r²ₖ (k+α)/(k+1).
     pub alpha: f64,
     /// First-pass gather radius of the global map (scene units); None: estimated.
@@ -63,7 +67,7 @@ impl Default for RenderSettings {
             height: 256,
             seed: 1,
             final_gather_rays: 8,
-            max_depth: 16,
+            max_bounces: DEFAULT_MAX_BOUNCES,
             alpha: 2.0 / 3.0,
             global_radius: None,
             caustic_radius: None,
@@ -95,6 +99,11 @@ fn out_of_range(field: &'static str, value: impl ToString, reason: impl ToString
         reason: reason.to_string(),
     }
 }
+
+/// Default safety cap on path bounces (see [`RenderSettings::max_bounces`]).
+pub const DEFAULT_MAX_BOUNCES: u32 = 1024;
+/// Largest accepted bounce cap.
+pub const MAX_BOUNCES: u32 = 100_000;
 
 /// Largest accepted image side.
 pub const MAX_SIDE: u32 = 16_384;
@@ -144,11 +153,11 @@ impl RenderSettings {
                 "must be at most 1024",
             ));
         }
-        if self.max_depth == 0 || self.max_depth > 1000 {
+        if self.max_bounces == 0 || self.max_bounces > MAX_BOUNCES {
             return Err(out_of_range(
-                "max_depth",
-                self.max_depth,
-                "must be between 1 and 1000",
+                "max_bounces",
+                self.max_bounces,
+                format!("must be between 1 and {MAX_BOUNCES}"),
             ));
         }
         if !(self.alpha > 0.0 && self.alpha < 1.0) {

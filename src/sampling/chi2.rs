@@ -154,9 +154,53 @@ pub fn test_directions(
     chi2_p_value(stat, dof.saturating_sub(1).max(1))
 }
 
+/// Chi-square test of a sampler that should be uniform in the cone about `axis` with
+/// 1 − cos θmax = `omc_max`: samples are binned in the cone's own coordinates, u = (1 − cos θ)
+/// / (1 − cos θmax) and φ, where a uniform cone is uniform (so a 0.01° cone is tested as
+/// finely as a hemisphere). 1 − cos θ is computed from the direction's component across
+/// the axis in f64, so the test sees the sampler's precision, not its own. A sample outside
+/// the cone (u > 1.01: an f32 direction 0.01° off an oblique axis is only that precise)
+/// fails the test. Returns the p-value.
+pub fn test_cone(
+    axis: Vec3,
+    omc_max: f64,
+    samples: usize,
+    mut sample: impl FnMut(usize) -> Vec3,
+) -> f64 {
+    const U: usize = 50;
+    const PHI: usize = 40;
+    let (t, b) = basis(axis);
+    let (t, b, a) = (t.as_dvec3(), b.as_dvec3(), axis.as_dvec3());
+    let mut observed = vec![0f64; U * PHI];
+    for s in 0..samples {
+        let d = sample(s).as_dvec3();
+        let (x, y, z) = (d.dot(t), d.dot(b), d.dot(a));
+        let len = (x * x + y * y + z * z).sqrt();
+        let s2 = (x * x + y * y) / (len * len);
+        let omc = if z >= 0.0 {
+            s2 / (1.0 + (1.0 - s2).max(0.0).sqrt())
+        } else {
+            2.0
+        };
+        let u = omc / omc_max;
+        if !(u <= 1.01) {
+            return 0.0;
+        }
+        let phi = y.atan2(x).rem_euclid(2.0 * PI);
+        let i = ((u * U as f64) as usize).min(U - 1);
+        let j = ((phi / (2.0 * PI) * PHI as f64) as usize).min(PHI - 1);
+        observed[i * PHI + j] += 1.0;
+    }
+    let e = samples as f64 / (U * PHI) as f64;
+    let stat: f64 = observed.iter().map(|o| (o - e).powi(2) / e).sum();
+    chi2_p_value(stat, U * PHI - 1)
+}
+
 #[cfg(test)]
 mod tests {
-    use super::super::{Purpose, Rng, cosine_hemisphere, uniform_cone, uniform_sphere};
+    use super::super::{
+        Purpose, Rng, cosine_hemisphere, one_minus_cos, uniform_cone, uniform_sphere,
+    };
     use super::*;
 
     #[test]
@@ -208,7 +252,7 @@ mod tests {
         let p = test_directions(
             axis,
             500_000,
-            |_| uniform_cone(axis, cos_max, rng.next_2d()),
+            |_| uniform_cone(axis, 1.0 - cos_max, rng.next_2d()),
             |d| {
                 if d.dot(axis) >= cos_max {
                     1.0 / (2.0 * PI * (1.0 - cos_max as f64))
@@ -218,5 +262,54 @@ mod tests {
             },
         );
         assert!(p > 1e-3, "cone p = {p}");
+    }
+
+    #[test]
+    fn cone_sampler_is_uniform_at_every_width_and_keeps_its_solid_angle() {
+        // Issue #8: cos θ = 1 − u(1 − cos θmax) in f32 gave a 0.15° cone only 58 rings.
+        let axis = Vec3::new(0.2, -0.9, 0.4).normalize();
+        for (k, degrees) in [0.01f32, 0.15, 30.0].into_iter().enumerate() {
+            let omc = one_minus_cos(degrees.to_radians());
+            let mut rng = Rng::stream(5, k as u64, 0, Purpose::Photon);
+            let p = test_cone(axis, omc as f64, 400_000, |_| {
+                uniform_cone(axis, omc, rng.next_2d())
+            });
+            assert!(p > 1e-3, "{degrees}° cone: p = {p}");
+            // Solid angle 2π(1 − cos θmax) from the sampler: the mean of 1 − cos θ over a
+            // regular grid of u is half its maximum (f64 from the direction's transverse part).
+            let m = 100_000;
+            let a = axis.as_dvec3().normalize();
+            let mean: f64 = (0..m)
+                .map(|i| {
+                    let v = (i as f64 * 0.618_033_988_75).fract() as f32;
+                    let d = uniform_cone(axis, omc, [(i as f32 + 0.5) / m as f32, v]);
+                    let d = d.as_dvec3().normalize();
+                    let s2 = d.cross(a).length_squared();
+                    s2 / (1.0 + (1.0 - s2).sqrt())
+                })
+                .sum::<f64>()
+                / m as f64;
+            let exact = 0.5 * (0.5 * (degrees as f64).to_radians()).sin().powi(2) * 2.0;
+            assert!(
+                (mean / exact - 1.0).abs() < 1e-4,
+                "{degrees}°: sampled mean 1 − cos θ {mean:e}, exact {exact:e}"
+            );
+        }
+    }
+
+    #[test]
+    fn cone_test_rejects_the_f32_cosine_sampler() {
+        // The old sampler (cos θ in f32) must fail the cone test at 0.15°: it can fail.
+        let axis = Vec3::Z;
+        let cos_max = 0.15f32.to_radians().cos();
+        let mut rng = Rng::stream(6, 0, 0, Purpose::Photon);
+        let p = test_cone(axis, 1.0 - (0.15f64).to_radians().cos(), 400_000, |_| {
+            let [u, v] = rng.next_2d();
+            let cos_t = 1.0 - u * (1.0 - cos_max);
+            let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+            let phi = 2.0 * std::f32::consts::PI * v;
+            Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t).normalize()
+        });
+        assert!(p < 1e-6, "f32 cosine sampler p = {p}");
     }
 }

@@ -99,12 +99,31 @@ pub fn uniform_sphere(u: [f32; 2]) -> Vec3 {
     Vec3::new(r * phi.cos(), r * phi.sin(), z)
 }
 
-/// Uniform direction in the cone of half-angle acos(`cos_max`) about unit `axis`;
-/// pdf = 1 / (2π (1 − cos_max)).
+/// 1 − cos θ for an angle in radians, as 2 sin²(θ/2): exact to f32 precision even for
+/// tiny angles, where `1.0 - θ.cos()` in f32 keeps only a few significant bits.
 #[inline]
-pub fn uniform_cone(axis: Vec3, cos_max: f32, u: [f32; 2]) -> Vec3 {
-    let cos_t = 1.0 - u[0] * (1.0 - cos_max);
-    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+pub fn one_minus_cos(theta: f32) -> f32 {
+    let s = (0.5 * theta as f64).sin();
+    (2.0 * s * s) as f32
+}
+
+/// 1 − cos of the angle between unit vectors `a` and `b`, as |a − b|²/2: precise for
+/// nearly parallel vectors (a dot product would round to 1).
+#[inline]
+pub fn one_minus_cos_between(a: Vec3, b: Vec3) -> f32 {
+    0.5 * (a - b).length_squared()
+}
+
+/// Uniform direction in the cone about unit `axis` whose half-angle θmax has
+/// 1 − cos θmax = `one_minus_cos_max` (see [`one_minus_cos`]); pdf = 1 / (2π (1 − cos θmax)).
+///
+/// 1 − cos θ is sampled directly (and sin θ = √((1 − cos θ)(1 + cos θ)) from it), so the
+/// precision does not depend on the cone's width: a 0.01° cone is as smooth as a 30° one.
+#[inline]
+pub fn uniform_cone(axis: Vec3, one_minus_cos_max: f32, u: [f32; 2]) -> Vec3 {
+    let omc = (u[0] * one_minus_cos_max).clamp(0.0, 2.0);
+    let sin_t = (omc * (2.0 - omc)).max(0.0).sqrt();
+    let cos_t = 1.0 - omc;
     let phi = 2.0 * PI * u[1];
     let (t, b) = basis(axis);
     (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + axis * cos_t).normalize()
@@ -182,7 +201,7 @@ mod tests {
                 assert!(d.is_finite() && (d.length() - 1.0).abs() < 1e-4 && d.dot(n) >= -1e-6);
                 let s = uniform_sphere([u, v]);
                 assert!(s.is_finite());
-                let c = uniform_cone(n, 0.99, [u, v]);
+                let c = uniform_cone(n, 0.01, [u, v]);
                 assert!(c.is_finite() && c.dot(n) >= 0.99 - 1e-4);
             }
         }

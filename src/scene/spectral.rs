@@ -6,7 +6,7 @@ use glam::Vec3;
 
 use super::{MaterialKind, PunctualKind, Scene};
 use crate::geometry::{Accel, triangle_normal};
-use crate::sampling::cdf;
+use crate::sampling::{cdf, one_minus_cos};
 use crate::spectral::{BinGrid, Role, Transport};
 
 /// Surface behaviour with per-bin data.
@@ -56,8 +56,9 @@ pub enum LightKind {
     Spot {
         position: Vec3,
         axis: Vec3,
-        cos_outer: f32,
-        cos_inner: f32,
+        /// 1 − cos of the outer and inner cone angles (precise for narrow cones).
+        omc_outer: f32,
+        omc_inner: f32,
     },
 }
 
@@ -187,10 +188,10 @@ impl SpectralScene {
                     LightKind::Spot {
                         position: l.position,
                         axis: direction,
-                        cos_outer: outer.cos(),
-                        cos_inner: inner.cos(),
+                        omc_outer: one_minus_cos(outer),
+                        omc_inner: one_minus_cos(inner.min(outer)),
                     },
-                    2.0 * std::f64::consts::PI * (1.0 - outer.cos() as f64),
+                    2.0 * std::f64::consts::PI * one_minus_cos(outer) as f64,
                 ),
             };
             if y > 0.0 {

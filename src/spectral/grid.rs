@@ -188,10 +188,30 @@ impl BinGrid {
                 })
                 .collect(),
         };
-        values
+        let mut values: Vec<f32> = values
             .into_iter()
             .map(|v| if v.is_finite() && v > 0.0 { v } else { 0.0 })
-            .collect()
+            .collect();
+        if self.transport == Transport::Spectral && role == Role::Emission {
+            self.keep_luminance(s, &mut values);
+        }
+        values
+    }
+
+    /// Rescales an emitter's bin values so that their luminance *on this grid* equals the
+    /// spectrum's luminance (1 nm sums): bin means weighted by the bins' ȳ integrals are
+    /// not the luminance when a spectrum is steep across a wide bin (a 1000 K blackbody
+    /// came out 2.35× too bright at 4 bins). What few bins still cost is the colour, not
+    /// the brightness a user set.
+    fn keep_luminance(&self, s: &Spectrum, values: &mut [f32]) {
+        let on_grid = self.to_xyz(values)[1];
+        let exact = s.luminance();
+        if on_grid > 0.0 && exact > 0.0 && on_grid.is_finite() && exact.is_finite() {
+            let k = (exact / on_grid) as f32;
+            for v in values.iter_mut() {
+                *v *= k;
+            }
+        }
     }
 
     /// XYZ of channel values.
