@@ -1,30 +1,20 @@
-//! prismap: interactive spectral photon mapping.
+//! prismap: the front ends over [`prismap_engine`] — the eframe viewer ([`app`]), the
+//! speed-against-error report ([`report`]) and, in `main.rs`, the command line. They parse,
+//! display and write; the engine renders (its modules are re-exported here, so
+//! `prismap::render::RenderSession` is the engine's).
 //!
-//! Data flows one way: scene file → [`scene::Scene`] → [`scene::SpectralScene`] (one bin
-//! grid) → photon pass → photon maps (full / compact / RGB records) → gather pass →
-//! film → PNG / EXR.
-//!
-//! ```
-//! use prismap::{render::{RenderSession, RenderSettings}, scene};
-//! let scene = scene::load_builtin("cornell-box").unwrap();
-//! let settings = RenderSettings { width: 16, height: 16, photons_per_pass: 2_000, ..RenderSettings::preview() };
-//! let mut session = RenderSession::new(&scene, settings).unwrap();
-//! session.run_pass().unwrap();
-//! assert_eq!(session.image().pixels.len(), 256);
+//! ```text
+//! prismap (this crate)      app/ (viewer), report/, main.rs (CLI: view | render | report | list)
+//!   └─ prismap-engine       spectral, scene, geometry, materials, lights, sampling,
+//!                           photon, render (RenderSession::run), output, metrics
 //! ```
 
 // `!(x > 0.0)` is written on purpose throughout: it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub use prismap_engine::{
+    geometry, lights, materials, metrics, output, photon, render, sampling, scene, spectral,
+};
+
 pub mod app;
-pub mod geometry;
-pub mod lights;
-pub mod materials;
-pub mod metrics;
-pub mod output;
-pub mod photon;
-pub mod render;
 pub mod report;
-pub mod sampling;
-pub mod scene;
-pub mod spectral;

@@ -12,6 +12,6 @@ use libfuzzer_sys::fuzz_target;
 fuzz_target!(|data: &[u8]| {
     static HOOK: std::sync::Once = std::sync::Once::new();
     HOOK.call_once(|| std::panic::set_hook(Box::new(|_| {})));
-    let result = std::panic::catch_unwind(|| prismap::scene::load_from_slice(data, "fuzz.gltf", None));
+    let result = std::panic::catch_unwind(|| prismap_engine::scene::load_from_slice(data, "fuzz.gltf", None));
     assert!(result.is_ok(), "a panic escaped the loader");
 });

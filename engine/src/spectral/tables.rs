@@ -177,7 +177,7 @@ pub fn cmf() -> &'static Cmf {
     static CMF: OnceLock<Cmf> = OnceLock::new();
     CMF.get_or_init(|| {
         let mut cols = columns_of(
-            include_str!("../../assets/data/cie1931_2deg_cmf_1nm.csv"),
+            include_str!("../../../assets/data/cie1931_2deg_cmf_1nm.csv"),
             4,
         )
         .into_iter();
@@ -193,7 +193,7 @@ pub fn cmf() -> &'static Cmf {
 pub fn d65() -> &'static PiecewiseLinear {
     static D65: OnceLock<PiecewiseLinear> = OnceLock::new();
     D65.get_or_init(|| {
-        columns_of(include_str!("../../assets/data/cie_d65_1nm.csv"), 2)
+        columns_of(include_str!("../../../assets/data/cie_d65_1nm.csv"), 2)
             .pop()
             .expect("d65 column")
     })
@@ -203,7 +203,7 @@ pub fn d65() -> &'static PiecewiseLinear {
 pub fn fl11() -> &'static PiecewiseLinear {
     static FL11: OnceLock<PiecewiseLinear> = OnceLock::new();
     FL11.get_or_init(|| {
-        columns_of(include_str!("../../assets/data/cie_fl11_5nm.csv"), 2)
+        columns_of(include_str!("../../../assets/data/cie_fl11_5nm.csv"), 2)
             .pop()
             .expect("fl11 column")
     })
@@ -213,7 +213,7 @@ pub fn fl11() -> &'static PiecewiseLinear {
 pub fn smits_basis() -> &'static [PiecewiseLinear; 7] {
     static BASIS: OnceLock<[PiecewiseLinear; 7]> = OnceLock::new();
     BASIS.get_or_init(|| {
-        let text = include_str!("../../assets/data/smits1999_basis.csv");
+        let text = include_str!("../../../assets/data/smits1999_basis.csv");
         let rows = parse_numeric_csv(text, 8).expect("embedded table parses");
         // colour-science stores the positions to 4 decimals; the exact ones are 380 + i·340/9.
         let xs: Vec<f64> = (0..rows.len())
@@ -240,7 +240,7 @@ pub struct GlassEntry {
 pub fn glasses() -> &'static [GlassEntry] {
     static GLASSES: OnceLock<Vec<GlassEntry>> = OnceLock::new();
     GLASSES.get_or_init(|| {
-        let text = include_str!("../../assets/data/glass_sellmeier.csv");
+        let text = include_str!("../../../assets/data/glass_sellmeier.csv");
         text.lines()
             .filter(|l| !l.starts_with('#') && !l.starts_with("glass,") && !l.trim().is_empty())
             .map(|l| {

@@ -131,14 +131,14 @@ impl Scene {
 
 /// Scenes compiled into the binary, so the program runs from any directory.
 pub const BUILTIN: &[(&str, &[u8])] = &[
-    ("prism", include_bytes!("../../scenes/prism.gltf")),
+    ("prism", include_bytes!("../../../scenes/prism.gltf")),
     (
         "cornell-box",
-        include_bytes!("../../scenes/cornell-box.gltf"),
+        include_bytes!("../../../scenes/cornell-box.gltf"),
     ),
     (
         "cornell-blackbody",
-        include_bytes!("../../scenes/cornell-blackbody.gltf"),
+        include_bytes!("../../../scenes/cornell-blackbody.gltf"),
     ),
 ];
 

@@ -4,11 +4,11 @@
 //! known luminance at few bins (bin-grid normalisation).
 
 use glam::Vec3;
-use prismap::photon::Storage;
-use prismap::render::{RenderSession, RenderSettings};
-use prismap::scene::{Camera, Material, MaterialKind, Scene};
-use prismap::spectral::color::{linear_srgb_to_xyz, luminance};
-use prismap::spectral::{IorModel, Spectrum};
+use prismap_engine::photon::Storage;
+use prismap_engine::render::{RenderSession, RenderSettings};
+use prismap_engine::scene::{Camera, Material, MaterialKind, Scene};
+use prismap_engine::spectral::color::{linear_srgb_to_xyz, luminance};
+use prismap_engine::spectral::{IorModel, Spectrum};
 
 /// The 12 triangles of the box [lo, hi], wound to face inwards or outwards.
 fn box_triangles(lo: Vec3, hi: Vec3, inward: bool) -> Vec<[Vec3; 3]> {

@@ -1,9 +1,9 @@
 //! Issue #2's acceptance checks, run on the shipped scenes.
 
-use prismap::metrics::psnr;
-use prismap::photon::Storage;
-use prismap::render::{RenderSession, RenderSettings};
-use prismap::scene;
+use prismap_engine::metrics::psnr;
+use prismap_engine::photon::Storage;
+use prismap_engine::render::{RenderSession, RenderSettings};
+use prismap_engine::scene;
 
 fn settings(bins: usize, storage: Storage) -> RenderSettings {
     RenderSettings {
@@ -62,13 +62,13 @@ fn cornell_compact_matches_full_to_40_db_and_builds_no_caustic_map() {
 
 #[test]
 fn prism_stores_spikes_and_compact_caustics_equal_full_bit_for_bit() {
-    use prismap::photon::{PhotonSettings, trace_photons};
-    use prismap::scene::SpectralScene;
+    use prismap_engine::photon::{PhotonSettings, trace_photons};
+    use prismap_engine::scene::SpectralScene;
     use std::sync::atomic::AtomicBool;
     let scene = scene::load_builtin("prism").unwrap();
     for bins in [20, 100] {
         let spectral =
-            SpectralScene::new(&scene, prismap::spectral::BinGrid::with_bins(bins).unwrap());
+            SpectralScene::new(&scene, prismap_engine::spectral::BinGrid::with_bins(bins).unwrap());
         assert!(spectral.has_dispersion && spectral.has_specular);
         let pass = |storage| {
             let ps = PhotonSettings {
@@ -106,7 +106,7 @@ fn prism_stores_spikes_and_compact_caustics_equal_full_bit_for_bit() {
 
 /// The brightest 7×7 neighbourhood (the rainbow is the brightest extended feature; a
 /// blur keeps single-pixel fireflies on the glass from winning).
-fn brightest_region(img: &prismap::render::Image) -> (u32, u32) {
+fn brightest_region(img: &prismap_engine::render::Image) -> (u32, u32) {
     let lum = |x: u32, y: u32| {
         let p = img.get(x, y);
         p[0] + p[1] + p[2]
@@ -130,7 +130,7 @@ fn brightest_region(img: &prismap::render::Image) -> (u32, u32) {
 
 /// Centroid (x, y) of pixels within `r` of `c` whose colour passes `pick`.
 fn centroid(
-    img: &prismap::render::Image,
+    img: &prismap_engine::render::Image,
     c: (u32, u32),
     r: u32,
     pick: impl Fn([f32; 3]) -> bool,

@@ -3,11 +3,12 @@
 use std::path::PathBuf;
 
 use glam::Vec3;
-use prismap::scene::{self, MaterialKind, SceneError};
-use prismap::spectral::Spectrum;
+use prismap_engine::scene::{self, MaterialKind, SceneError};
+use prismap_engine::spectral::Spectrum;
 
 fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    // The workspace root: scenes/ and tests/fuzz/ live there, beside engine/.
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
 #[test]
@@ -237,7 +238,7 @@ fn external_paths_outside_the_scene_folder_are_refused() {
 
 #[test]
 fn measured_spd_csv_shapes_an_emitter_and_bad_tables_are_named() {
-    use prismap::scene::parse_spd_csv;
+    use prismap_engine::scene::parse_spd_csv;
     // Parsing: header and comment skipped; unsorted, duplicate, negative, short rejected.
     let t = parse_spd_csv("# lamp\nwavelength_nm,value\n400,1\n500,2\n600,0.5\n").unwrap();
     assert_eq!(t.xs(), &[400.0, 500.0, 600.0]);

@@ -5,10 +5,10 @@ use std::sync::atomic::AtomicBool;
 
 use divan::{Bencher, black_box, counter::ItemsCount};
 use glam::Vec3;
-use prismap::photon::{PhotonSettings, Storage, trace_photons};
-use prismap::sampling::{Purpose, Rng, uniform_sphere};
-use prismap::scene::{SpectralScene, load_builtin};
-use prismap::spectral::{BinGrid, Role, Spectrum, spd};
+use prismap_engine::photon::{PhotonSettings, Storage, trace_photons};
+use prismap_engine::sampling::{Purpose, Rng, uniform_sphere};
+use prismap_engine::scene::{SpectralScene, load_builtin};
+use prismap_engine::spectral::{BinGrid, Role, Spectrum, spd};
 
 fn main() {
     divan::main();

@@ -5,13 +5,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use prismap::materials::{refract, scatter_dielectric};
-use prismap::photon::{PhotonBatch, PhotonMap, Storage};
-use prismap::render::{RenderSession, RenderSettings};
-use prismap::sampling::chi2::chi2_p_value;
-use prismap::sampling::{Purpose, Rng, uniform_triangle};
-use prismap::scene::{self, Camera, Material, MaterialKind, Scene};
-use prismap::spectral::{BinGrid, IorModel, Spectrum};
+use prismap_engine::materials::{refract, scatter_dielectric};
+use prismap_engine::photon::{PhotonBatch, PhotonMap, Storage};
+use prismap_engine::render::{RenderSession, RenderSettings};
+use prismap_engine::sampling::chi2::chi2_p_value;
+use prismap_engine::sampling::{Purpose, Rng, uniform_triangle};
+use prismap_engine::scene::{self, Camera, Material, MaterialKind, Scene};
+use prismap_engine::spectral::{BinGrid, IorModel, Spectrum};
 
 fn small(storage: Storage, bins: usize) -> RenderSettings {
     RenderSettings {
@@ -49,7 +49,7 @@ fn camera_inside_glass_renders_finite() {
         // gamut legitimately have negative channels until display).
         for p in r.image().pixels {
             assert!(p.iter().all(|v| v.is_finite()), "{p:?}");
-            let y = prismap::spectral::color::luminance(p.map(f64::from));
+            let y = prismap_engine::spectral::color::luminance(p.map(f64::from));
             assert!(y >= -1e-4, "{storage:?}: luminance {y}");
         }
     }
@@ -89,12 +89,12 @@ fn dispersion_deviation_per_bin_follows_snell_with_sellmeier() {
         let grid = BinGrid::with_bins(bins).unwrap();
         let mut s = scene::load_builtin("prism").unwrap();
         s.lights.truncate(1);
-        let spectral = prismap::scene::SpectralScene::new(&s, grid.clone());
+        let spectral = prismap_engine::scene::SpectralScene::new(&s, grid.clone());
         let eta = spectral
             .materials
             .iter()
             .find_map(|m| match &m.kind {
-                prismap::scene::SurfaceKind::Dielectric { eta, .. } => Some(eta.clone()),
+                prismap_engine::scene::SurfaceKind::Dielectric { eta, .. } => Some(eta.clone()),
                 _ => None,
             })
             .unwrap();
@@ -175,7 +175,7 @@ fn zero_area_light_is_skipped_and_power_unchanged() {
         .iter()
         .position(|m| m.emission.is_some())
         .unwrap() as u32;
-    let before: f32 = prismap::scene::SpectralScene::new(&s, BinGrid::with_bins(8).unwrap())
+    let before: f32 = prismap_engine::scene::SpectralScene::new(&s, BinGrid::with_bins(8).unwrap())
         .lights
         .iter()
         .map(|l| l.power)
@@ -184,7 +184,7 @@ fn zero_area_light_is_skipped_and_power_unchanged() {
     s.triangles.push([Vec3::ZERO, Vec3::X, 2.0 * Vec3::X]);
     s.triangles.push([Vec3::Y, Vec3::Y, Vec3::Y]);
     s.triangle_material.extend([light_mat, light_mat]);
-    let spectral = prismap::scene::SpectralScene::new(&s, BinGrid::with_bins(8).unwrap());
+    let spectral = prismap_engine::scene::SpectralScene::new(&s, BinGrid::with_bins(8).unwrap());
     let after: f32 = spectral.lights.iter().map(|l| l.power).sum();
     assert_eq!(before, after);
     let mut r = RenderSession::new(&s, small(Storage::Compact, 8)).unwrap();
@@ -255,7 +255,7 @@ fn wavelength_splitting_picks_bins_in_proportion_to_flux_chi_square() {
     let trials = 50_000;
     for t in 0..trials {
         let mut rng = Rng::stream(5, 0, t, Purpose::Photon);
-        for piece in prismap::photon::split_dispersive(&flux, 1, &mut rng) {
+        for piece in prismap_engine::photon::split_dispersive(&flux, 1, &mut rng) {
             let bin = piece.iter().position(|v| *v > 0.0).unwrap();
             counts[bin] += 1.0;
         }
