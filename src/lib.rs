@@ -17,4 +17,5 @@ pub use prismap_engine::{
 };
 
 pub mod app;
+pub mod cli;
 pub mod report;

@@ -157,7 +157,25 @@ fn bad_arguments_fail_clearly_and_leave_no_file() {
     let e = fails(&["render", "cornell-box", "--size", "-5x3", "-o", p]);
     assert!(e.contains("size"), "{e}");
     let e = fails(&["render", "cornell-box", "--size", "0x3", "-o", p]);
-    assert!(e.contains("width"), "{e}");
+    assert!(e.contains("--size 0x3"), "{e}");
+    // Every bad value is named by the flag the user typed, not an internal field.
+    for (flag, value) in [
+        ("--photons", "0"),
+        ("--passes", "0"),
+        ("--seconds", "-2"),
+        ("--exposure", "-1"),
+        ("--photon-budget", "-3"),
+        ("--fg", "5000"),
+        ("--alpha", "1.5"),
+        ("--max-bounces", "0"),
+        ("--preset", "fast"),
+    ] {
+        let e = fails(&["render", "cornell-box", flag, value, "-o", p]);
+        assert!(
+            e.contains(&format!("{flag} {value}")),
+            "{flag} {value}: {e}"
+        );
+    }
     let e = fails(&["render", "cornell-box", "--storage", "zip", "-o", p]);
     assert!(e.contains("zip"), "{e}");
     let e = fails(&["render", "no-such-scene.gltf", "-o", p]);

@@ -27,7 +27,7 @@ fn photons_traced(bencher: Bencher, bins: usize) {
     let scene = cornell(bins);
     let settings = PhotonSettings {
         photons: 50_000,
-        storage: Storage::Compact,
+        record: Storage::Compact.record(),
         max_bounces: 1024,
         dispersion_split: 4,
         caustic_map: true,
@@ -50,7 +50,7 @@ fn gather_queries(bencher: Bencher, storage: Storage) {
     let scene = cornell(20);
     let settings = PhotonSettings {
         photons: 100_000,
-        storage,
+        record: Storage::record(storage),
         max_bounces: 1024,
         dispersion_split: 4,
         caustic_map: true,

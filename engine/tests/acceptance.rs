@@ -46,7 +46,7 @@ fn cornell_compact_matches_full_to_40_db_and_builds_no_caustic_map() {
     for bins in [4, 20] {
         let full = render(&scene, settings(bins, Storage::Full), 2);
         let compact = render(&scene, settings(bins, Storage::Compact), 2);
-        let db = psnr(&full.image(), &compact.image(), 1.0);
+        let db = psnr(&full.image(), &compact.image(), 1.0).unwrap();
         println!("cornell-box {bins} bins: compact vs full PSNR {db:.2} dB");
         assert!(db >= 40.0, "{bins} bins: {db} dB");
         assert_eq!(compact.memory().caustic_map, 0);
@@ -67,13 +67,15 @@ fn prism_stores_spikes_and_compact_caustics_equal_full_bit_for_bit() {
     use std::sync::atomic::AtomicBool;
     let scene = scene::load_builtin("prism").unwrap();
     for bins in [20, 100] {
-        let spectral =
-            SpectralScene::new(&scene, prismap_engine::spectral::BinGrid::with_bins(bins).unwrap());
+        let spectral = SpectralScene::new(
+            &scene,
+            prismap_engine::spectral::BinGrid::with_bins(bins).unwrap(),
+        );
         assert!(spectral.has_dispersion && spectral.has_specular);
         let pass = |storage| {
             let ps = PhotonSettings {
                 photons: 20_000,
-                storage,
+                record: Storage::record(storage),
                 max_bounces: 1024,
                 dispersion_split: 4,
                 caustic_map: true,

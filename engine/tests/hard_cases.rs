@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use prismap_engine::materials::{refract, scatter_dielectric};
-use prismap_engine::photon::{PhotonBatch, PhotonMap, Storage};
+use prismap_engine::photon::{PhotonBatch, PhotonMap, Record, Storage};
 use prismap_engine::render::{RenderSession, RenderSettings};
 use prismap_engine::sampling::chi2::chi2_p_value;
 use prismap_engine::sampling::{Purpose, Rng, uniform_triangle};
@@ -119,7 +119,7 @@ fn dispersion_deviation_per_bin_follows_snell_with_sellmeier() {
 fn zero_and_non_finite_flux_is_never_stored() {
     let grid = BinGrid::with_bins(8).unwrap();
     for storage in [Storage::Full, Storage::Compact] {
-        let mut b = PhotonBatch::new(storage, 8);
+        let mut b = PhotonBatch::new(storage.record(), &grid);
         b.push(&grid, Vec3::ZERO, Vec3::Z, &[0.0; 8]);
         b.push(
             &grid,
@@ -147,7 +147,7 @@ fn zero_and_non_finite_flux_is_never_stored() {
 #[test]
 fn photons_far_outside_the_scene_and_empty_maps_are_harmless() {
     let grid = BinGrid::with_bins(4).unwrap();
-    let mut b = PhotonBatch::new(Storage::Compact, 4);
+    let mut b = PhotonBatch::new(Record::Compact, &grid);
     for p in [
         Vec3::splat(1e30),
         Vec3::splat(-1e30),
@@ -162,7 +162,7 @@ fn photons_far_outside_the_scene_and_empty_maps_are_harmless() {
         map.gather(&grid, Vec3::splat(1e30), Vec3::Z, 1e10, &mut out),
         1
     );
-    let empty = PhotonMap::build(PhotonBatch::new(Storage::Full, 4));
+    let empty = PhotonMap::build(PhotonBatch::new(Record::Full, &grid));
     assert_eq!(empty.gather(&grid, Vec3::ZERO, Vec3::Z, 1e9, &mut out), 0);
     assert_eq!(empty.typical_knn_radius(10, 10), None);
 }
@@ -400,7 +400,7 @@ fn photon_maps_never_exceed_the_budget_and_photons_adapt() {
             r.stats().photons_last_pass
         );
     }
-    // A budget below the minimum is refused with its field named.
+    // A budget below the minimum is refused, naming the flag the user sets it with.
     let bad = RenderSettings {
         photon_budget_bytes: Some(10),
         ..small(Storage::Compact, 8)
@@ -409,6 +409,6 @@ fn photon_maps_never_exceed_the_budget_and_photons_adapt() {
         bad.validate()
             .unwrap_err()
             .to_string()
-            .contains("photon_budget_bytes")
+            .contains("--photon-budget")
     );
 }

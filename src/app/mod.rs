@@ -351,7 +351,7 @@ impl ViewerApp {
                 self.memory_history.push_back(MemorySample {
                     seconds: self.started.elapsed().as_secs_f64(),
                     photon_maps: s.memory.photon_maps as f64,
-                    resident: resident_memory_bytes().unwrap_or(0) as f64,
+                    resident: crate::metrics::resident_bytes().unwrap_or(0) as f64,
                 });
                 while self.memory_history.len() > 600 {
                     self.memory_history.pop_front();
@@ -521,13 +521,6 @@ pub fn list_scene_files(dir: &Path) -> Vec<PathBuf> {
         .unwrap_or_default();
     v.sort();
     v
-}
-
-/// Resident memory of this process (Linux: /proc/self/statm), if known.
-pub fn resident_memory_bytes() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/self/statm").ok()?;
-    let pages: u64 = s.split_whitespace().nth(1)?.parse().ok()?;
-    Some(pages * 4096)
 }
 
 /// Runs the viewer in a native window. Fails (without panicking) where no display is

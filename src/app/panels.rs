@@ -251,7 +251,7 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         row("bytes per photon", format!("{:.1}", s.bytes_per_photon));
                         row("film (+ probes)", format_bytes(m.film as f64));
                         row("BVH", format_bytes(m.bvh as f64));
-                        if let Some(r) = super::resident_memory_bytes() {
+                        if let Some(r) = crate::metrics::resident_bytes() {
                             row("process resident", format_bytes(r as f64));
                         }
                     });

@@ -10,7 +10,9 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use crate::render::{Image, MemoryReport, Probe, RenderSession, RenderSettings, RenderStats};
+use crate::render::{
+    Flow, Image, MemoryReport, Probe, RenderError, RenderSession, RenderSettings, RenderStats, Stop,
+};
 use crate::scene::Scene;
 
 pub enum Command {
@@ -43,21 +45,9 @@ pub struct Snapshot {
     pub warnings: Vec<String>,
     /// Seconds from the `Start` to this snapshot.
     pub since_start: f64,
-    /// A quick low-resolution first image shown right after a change (see [`preview`]).
+    /// A quick low-resolution first image shown right after a change
+    /// (see [`RenderSettings::quick_preview_of`]).
     pub preview: bool,
-}
-
-/// Settings of the quick first image after a change: a quarter of the resolution, a
-/// tenth of the photons, no final gathering. It arrives in tens of milliseconds, so the
-/// view answers a change at once; the full-quality passes replace it.
-pub fn preview(settings: &RenderSettings) -> RenderSettings {
-    RenderSettings {
-        width: settings.width.div_ceil(4),
-        height: settings.height.div_ceil(4),
-        photons_per_pass: (settings.photons_per_pass / 10).max(1000),
-        final_gather_rays: 0,
-        ..settings.clone()
-    }
 }
 
 /// Nearest-neighbour upscale of a preview to the full image size.
@@ -95,7 +85,7 @@ pub struct Worker {
 
 impl Worker {
     /// Starts the worker thread; `repaint` is called whenever there is news.
-    pub fn spawn(repaint: impl Fn() + Send + 'static) -> Self {
+    pub fn spawn(repaint: impl Fn() + Send + Sync + 'static) -> Self {
         let (tx, rx) = mpsc::channel();
         let shared = Arc::new(Shared::default());
         let cancel = Arc::new(Mutex::new(Arc::new(AtomicBool::new(false))));
@@ -193,7 +183,7 @@ fn run(
     shared: Arc<Shared>,
     cancel_slot: Arc<Mutex<Arc<AtomicBool>>>,
     current: Arc<AtomicU64>,
-    repaint: impl Fn(),
+    repaint: impl Fn() + Sync,
 ) {
     // Leave one core to the UI.
     let threads = std::thread::available_parallelism()
@@ -214,10 +204,15 @@ fn run(
             return;
         }
     };
+    // Behind a mutex: the pass observer reads it from inside the pool's `install`.
+    let rx = Mutex::new(rx);
+    let recv = || rx.lock().unwrap_or_else(PoisonError::into_inner);
     let mut job: Option<Job> = None;
     let mut paused = false;
     let mut probes: Vec<(u32, u32)> = Vec::new();
     let mut stop_after: Option<u64> = None;
+    // Commands that arrived during a run: the run stops after its pass to handle them.
+    let mut inbox: Vec<Command> = Vec::new();
     loop {
         // Take every pending command; block only when there is nothing to render.
         let idle = paused
@@ -225,20 +220,21 @@ fn run(
             || stop_after
                 .is_some_and(|n| job.as_ref().is_some_and(|j| j.session.stats().passes >= n));
         let first = if idle {
-            match rx.recv_timeout(Duration::from_millis(200)) {
+            match recv().recv_timeout(Duration::from_millis(200)) {
                 Ok(c) => Some(c),
                 Err(mpsc::RecvTimeoutError::Timeout) => None,
                 Err(mpsc::RecvTimeoutError::Disconnected) => return,
             }
         } else {
-            match rx.try_recv() {
+            match recv().try_recv() {
                 Ok(c) => Some(c),
                 Err(TryRecvError::Empty) => None,
                 Err(TryRecvError::Disconnected) => return,
             }
         };
-        let mut pending: Vec<Command> = first.into_iter().collect();
-        while let Ok(c) = rx.try_recv() {
+        let mut pending: Vec<Command> = std::mem::take(&mut inbox);
+        pending.extend(first);
+        while let Ok(c) = recv().try_recv() {
             pending.push(c);
         }
         for c in pending {
@@ -252,7 +248,7 @@ fn run(
                         continue; // superseded before it started
                     }
                     let started = Instant::now();
-                    let preview_settings = preview(&settings);
+                    let preview_settings = settings.quick_preview_of();
                     match pool.install(|| RenderSession::new(&scene, settings)) {
                         Ok(mut session) => {
                             // The quick first image, on the same (already projected) scene.
@@ -314,22 +310,49 @@ fn run(
         if j.generation != current.load(Ordering::SeqCst) {
             continue; // a newer Start is on its way
         }
-        // One pass; a panic inside is caught and shown, and the next change restarts.
+        // Passes until a command arrives (or the pass limit); a panic inside is caught and
+        // shown, and the next change restarts.
+        let stop = Stop {
+            passes: stop_after.map(|n| n.saturating_sub(j.session.stats().passes)),
+            seconds: None,
+        };
+        let (generation, started) = (j.generation, j.started);
+        // The observer runs inside the pool's `install`, which needs it to be Sync.
+        let inbox_shared = Mutex::new(&mut inbox);
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            pool.install(|| j.session.run_pass())
+            pool.install(|| {
+                j.session.run(stop, None, &mut |s, _| {
+                    if generation == current.load(Ordering::SeqCst) {
+                        *shared
+                            .snapshot
+                            .lock()
+                            .unwrap_or_else(PoisonError::into_inner) =
+                            Some(snapshot(s, generation, started));
+                        repaint();
+                    }
+                    let next = rx.lock().unwrap_or_else(PoisonError::into_inner).try_recv();
+                    match next {
+                        Ok(c) => {
+                            inbox_shared
+                                .lock()
+                                .unwrap_or_else(PoisonError::into_inner)
+                                .push(c);
+                            Flow::Stop
+                        }
+                        Err(TryRecvError::Empty) => Flow::Continue,
+                        Err(TryRecvError::Disconnected) => Flow::Stop,
+                    }
+                })
+            })
         }));
         match result {
-            Ok(Ok(())) => {
-                let snap = snapshot(&j.session, j.generation, j.started);
-                if j.generation == current.load(Ordering::SeqCst) {
-                    *shared
-                        .snapshot
-                        .lock()
-                        .unwrap_or_else(PoisonError::into_inner) = Some(snap);
-                    repaint();
-                }
+            Ok(Ok(_)) | Ok(Err(RenderError::Cancelled)) => {}
+            Ok(Err(e)) => {
+                *shared.error.lock().unwrap_or_else(PoisonError::into_inner) =
+                    Some((generation, e.to_string()));
+                job = None;
+                repaint();
             }
-            Ok(Err(_cancelled)) => {}
             Err(panic) => {
                 let msg = panic
                     .downcast_ref::<String>()
@@ -337,7 +360,7 @@ fn run(
                     .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                     .unwrap_or_else(|| "unknown panic".to_string());
                 *shared.error.lock().unwrap_or_else(PoisonError::into_inner) =
-                    Some((j.generation, format!("the render pass failed: {msg}")));
+                    Some((generation, format!("the render pass failed: {msg}")));
                 job = None;
                 repaint();
             }

@@ -10,7 +10,7 @@ use plotters::prelude::*;
 use super::{Report, ReportError, Run};
 use crate::output::read_exr;
 use crate::render::Image;
-use crate::spectral::color::srgb_encode;
+use crate::spectral::color::srgb8;
 
 fn font() {
     static ONCE: Once = Once::new();
@@ -24,7 +24,7 @@ fn font() {
 }
 
 fn err(e: impl std::fmt::Display) -> ReportError {
-    ReportError::Io(format!("plot: {e}"))
+    ReportError::Plot(e.to_string())
 }
 
 /// A stable colour per (storage, bins).
@@ -203,7 +203,7 @@ pub fn memory(report: &Report, scene: &str, runs: &[Run]) -> Result<(), ReportEr
 }
 
 fn display(img: &Image, x: u32, y: u32) -> [u8; 3] {
-    img.get(x, y).map(|v| (srgb_encode(v) * 255.0 + 0.5) as u8)
+    img.get(x, y).map(srgb8)
 }
 
 /// Reference, full 8 bins, compact 8 bins and RGB side by side (top), and the heat maps

@@ -7,12 +7,8 @@ use crate::spectral::color::{SRGB_TO_XYZ, mul3, srgb_encode};
 /// PSNR by the paper's equation 6 on [0, 1] display values: 10·log10(MN / Σ(a−b)²), the
 /// squared differences summed over pixels and averaged over the three channels.
 /// Infinite for identical images.
-pub fn psnr(a: &Image, b: &Image, exposure: f32) -> f64 {
-    assert_eq!(
-        (a.width, a.height),
-        (b.width, b.height),
-        "images must match in size"
-    );
+pub fn psnr(a: &Image, b: &Image, exposure: f32) -> Result<f64, SizeMismatch> {
+    same_size(a, b)?;
     let mut sse = 0.0f64;
     for (p, q) in a.pixels.iter().zip(&b.pixels) {
         for c in 0..3 {
@@ -21,10 +17,23 @@ pub fn psnr(a: &Image, b: &Image, exposure: f32) -> f64 {
         }
     }
     let mn = a.pixels.len() as f64;
-    if sse == 0.0 {
+    Ok(if sse == 0.0 {
         f64::INFINITY
     } else {
         10.0 * (mn / sse).log10()
+    })
+}
+
+/// Two images compared pixel by pixel differ in size (e.g. a user's reference image).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("the images differ in size: {0}x{1} against {2}x{3}")]
+pub struct SizeMismatch(pub u32, pub u32, pub u32, pub u32);
+
+fn same_size(a: &Image, b: &Image) -> Result<(), SizeMismatch> {
+    if (a.width, a.height) == (b.width, b.height) && a.pixels.len() == b.pixels.len() {
+        Ok(())
+    } else {
+        Err(SizeMismatch(a.width, a.height, b.width, b.height))
     }
 }
 
@@ -115,12 +124,8 @@ pub fn ciede2000(lab1: [f64; 3], lab2: [f64; 3]) -> f64 {
 }
 
 /// Mean and 95th percentile of per-pixel CIEDE2000 between two images as displayed.
-pub fn de2000_stats(a: &Image, b: &Image, exposure: f32) -> (f64, f64) {
-    assert_eq!(
-        (a.width, a.height),
-        (b.width, b.height),
-        "images must match in size"
-    );
+pub fn de2000_stats(a: &Image, b: &Image, exposure: f32) -> Result<(f64, f64), SizeMismatch> {
+    same_size(a, b)?;
     let mut d: Vec<f64> = a
         .pixels
         .iter()
@@ -128,20 +133,34 @@ pub fn de2000_stats(a: &Image, b: &Image, exposure: f32) -> (f64, f64) {
         .map(|(p, q)| ciede2000(lab_of_display(*p, exposure), lab_of_display(*q, exposure)))
         .collect();
     if d.is_empty() {
-        return (0.0, 0.0);
+        return Ok((0.0, 0.0));
     }
     let mean = d.iter().sum::<f64>() / d.len() as f64;
     d.sort_by(f64::total_cmp);
     let p95 = d[((d.len() - 1) as f64 * 0.95).round() as usize];
-    (mean, p95)
+    Ok((mean, p95))
 }
 
-/// Peak resident memory of this process (Linux VmHWM), if known.
+/// Peak resident memory of this process (Linux `VmHWM`), if known.
 pub fn peak_rss_bytes() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
+    proc_kib("/proc/self/status", "VmHWM:").map(|k| k * 1024)
+}
+
+/// Resident memory of this process now (Linux `VmRSS`), if known.
+pub fn resident_bytes() -> Option<u64> {
+    proc_kib("/proc/self/status", "VmRSS:").map(|k| k * 1024)
+}
+
+/// The machine's memory (Linux `MemTotal`), if known.
+pub fn total_memory_bytes() -> Option<u64> {
+    proc_kib("/proc/meminfo", "MemTotal:").map(|k| k * 1024)
+}
+
+/// The one reader of Linux's `/proc` memory figures: `key:  N kB` lines.
+fn proc_kib(file: &str, key: &str) -> Option<u64> {
+    let s = std::fs::read_to_string(file).ok()?;
+    let line = s.lines().find(|l| l.starts_with(key))?;
+    line.split_whitespace().nth(1)?.parse().ok()
 }
 
 #[cfg(test)]
@@ -184,18 +203,28 @@ mod tests {
             height: 1,
             pixels: vec![[v; 3]],
         };
-        assert_eq!(psnr(&img(0.5), &img(0.5), 1.0), f64::INFINITY);
+        assert_eq!(psnr(&img(0.5), &img(0.5), 1.0), Ok(f64::INFINITY));
         // Every value off by 0.1 in display space → MSE 0.01 → 20 dB.
         let b = img(crate::spectral::color::srgb_decode(0.1));
-        assert!((psnr(&img(0.0), &b, 1.0) - 20.0).abs() < 1e-3);
-        let (m, p) = de2000_stats(&img(0.5), &img(0.5), 1.0);
+        assert!((psnr(&img(0.0), &b, 1.0).unwrap() - 20.0).abs() < 1e-3);
+        let (m, p) = de2000_stats(&img(0.5), &img(0.5), 1.0).unwrap();
         assert_eq!((m, p), (0.0, 0.0));
+        // A reference of another size is an error, not a panic.
+        let wide = Image {
+            width: 2,
+            height: 1,
+            pixels: vec![[0.5; 3]; 2],
+        };
+        assert_eq!(psnr(&img(0.5), &wide, 1.0), Err(SizeMismatch(1, 1, 2, 1)));
+        assert!(de2000_stats(&wide, &img(0.5), 1.0).is_err());
     }
 
     #[test]
     fn peak_memory_is_reported_on_linux() {
         if cfg!(target_os = "linux") {
             assert!(peak_rss_bytes().unwrap() > 1_000_000);
+            assert!(resident_bytes().unwrap() > 1_000_000);
+            assert!(total_memory_bytes().unwrap() > resident_bytes().unwrap());
         }
     }
 }

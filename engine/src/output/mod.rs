@@ -2,11 +2,14 @@
 //! JSON. Every file is written to a temporary name beside the target and renamed, so an
 //! interrupted write never leaves a corrupt file under the real name.
 
+mod stats;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::render::Image;
-use crate::spectral::color::srgb_encode;
+use crate::spectral::color::srgb8;
+pub use stats::{MemoryStats, PhotonStats, RadiusStats, SecondsStats, Stats};
 
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
@@ -53,7 +56,7 @@ pub fn to_srgb8(image: &Image, exposure: f32) -> Vec<u8> {
     image
         .pixels
         .iter()
-        .flat_map(|p| p.map(|v| (srgb_encode(v * exposure) * 255.0 + 0.5) as u8))
+        .flat_map(|p| p.map(|v| srgb8(v * exposure)))
         .collect()
 }
 
@@ -125,68 +128,12 @@ pub fn read_exr(path: &Path) -> Result<Image, OutputError> {
     })
 }
 
-/// Writes a JSON value, pretty-printed.
-pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), OutputError> {
+/// Writes a value as JSON, pretty-printed.
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), OutputError> {
     write_atomic(path, |tmp| {
         let mut f = std::fs::File::create(tmp).map_err(|e| e.to_string())?;
         serde_json::to_writer_pretty(&mut f, value).map_err(|e| e.to_string())?;
         f.write_all(b"\n").map_err(|e| e.to_string())
-    })
-}
-
-/// The stats JSON of a finished render (schema in the README).
-pub fn stats_json(
-    session: &crate::render::RenderSession,
-    image: &Image,
-    total_seconds: f64,
-) -> serde_json::Value {
-    let st = session.stats();
-    let mem = session.memory();
-    let s = session.settings();
-    let nonfinite = image
-        .pixels
-        .iter()
-        .filter(|p| p.iter().any(|v| !v.is_finite()))
-        .count();
-    serde_json::json!({
-        "scene": session.scene().name,
-        "bins": session.scene().bins(),
-        "storage": s.storage.name(),
-        "size": [s.width, s.height],
-        "passes": st.passes,
-        "seed": s.seed,
-        "photons_per_pass": s.photons_per_pass,
-        "final_gather_rays": s.final_gather_rays,
-        "photons": {
-            "emitted": st.photons_emitted,
-            "stored_global": st.stored_global,
-            "stored_caustic": st.stored_caustic,
-            "spike_records": st.spike_records,
-            "stored_global_total": st.stored_global_total,
-            "stored_caustic_total": st.stored_caustic_total,
-            "spike_records_total": st.spike_records_total,
-            "dispersion_splits": st.dispersion_splits,
-        },
-        "memory_bytes": {
-            "global_map": mem.global_map,
-            "caustic_map": mem.caustic_map,
-            "photon_maps": mem.photon_maps,
-            "film": mem.film,
-            "bvh": mem.bvh,
-        },
-        "bytes_per_photon": session.bytes_per_photon(),
-        "photons_last_pass": st.photons_last_pass,
-        "radius": {"global": st.r_global, "caustic": st.r_caustic},
-        "seconds": {
-            "photon_pass": st.photon_seconds,
-            "gather_pass": st.gather_seconds,
-            "total": total_seconds,
-        },
-        "nonfinite_pixels": nonfinite,
-        "peak_rss_bytes": crate::metrics::peak_rss_bytes(),
-        "dropped_samples": session.film().dropped_samples(),
-        "skipped": session.skipped(),
-        "warnings": session.scene().warnings,
     })
 }
 

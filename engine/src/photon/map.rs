@@ -4,14 +4,14 @@
 use glam::Vec3;
 
 use super::kdtree;
-use super::record::{PhotonHeader, Storage, decode_spike, encode_spike};
+use super::record::{PhotonHeader, Record, decode_spike, encode_spike};
 use crate::spectral::smits::BranchSums;
 use crate::spectral::{BinGrid, spd};
 
 /// Photons as the tracer produces them, not yet searchable.
 #[derive(Clone, Debug)]
 pub struct PhotonBatch {
-    storage: Storage,
+    record: Record,
     stride: usize,
     pub headers: Vec<PhotonHeader>,
     pub flux: Vec<f32>,
@@ -19,10 +19,17 @@ pub struct PhotonBatch {
 }
 
 impl PhotonBatch {
-    pub fn new(storage: Storage, bins: usize) -> Self {
+    /// An empty batch of `record`s for `grid`. Compact records need a spectral grid; on
+    /// the RGB grid a "triplet" is the flux itself, so full records are kept (same bytes).
+    pub fn new(record: Record, grid: &BinGrid) -> Self {
+        let record = if grid.smits().is_some() {
+            record
+        } else {
+            Record::Full
+        };
         Self {
-            storage,
-            stride: storage.flux_stride(bins),
+            record,
+            stride: record.flux_stride(grid.len()),
             headers: Vec::new(),
             flux: Vec::new(),
             spikes: 0,
@@ -44,21 +51,18 @@ impl PhotonBatch {
             return;
         }
         self.headers.push(PhotonHeader::new(pos, dir));
-        match self.storage {
-            Storage::Full | Storage::Rgb => self.flux.extend_from_slice(flux),
-            Storage::Compact => {
+        match (self.record, grid.smits()) {
+            (Record::Compact, Some(smits)) => {
                 let rec = match spd::single_nonzero(flux) {
                     Some(bin) => {
                         self.spikes += 1;
                         encode_spike(bin, flux[bin])
                     }
-                    None => grid
-                        .smits()
-                        .expect("compact storage needs a spectral grid")
-                        .encode(flux),
+                    None => smits.encode(flux),
                 };
                 self.flux.extend_from_slice(&rec);
             }
+            _ => self.flux.extend_from_slice(flux),
         }
     }
 
@@ -77,7 +81,7 @@ impl PhotonBatch {
 /// A searchable photon map.
 #[derive(Clone, Debug)]
 pub struct PhotonMap {
-    storage: Storage,
+    record: Record,
     stride: usize,
     positions: Vec<[f32; 3]>,
     dirs: Vec<u32>,
@@ -102,7 +106,7 @@ impl PhotonMap {
             flux.extend_from_slice(&batch.flux[i * stride..(i + 1) * stride]);
         }
         Self {
-            storage: batch.storage,
+            record: batch.record,
             stride,
             positions,
             dirs,
@@ -112,8 +116,8 @@ impl PhotonMap {
         }
     }
 
-    pub fn storage(&self) -> Storage {
-        self.storage
+    pub fn record(&self) -> Record {
+        self.record
     }
 
     pub fn len(&self) -> usize {
@@ -172,8 +176,8 @@ impl PhotonMap {
         let mut count = 0;
         let r2 = radius * radius;
         let facing = |i: usize| super::record::oct_decode(self.dirs[i]).dot(n) < 0.0;
-        match self.storage {
-            Storage::Full | Storage::Rgb => {
+        match self.record {
+            Record::Full => {
                 let s = self.stride;
                 kdtree::for_each_within(&self.positions, &self.axes, p, r2, |i, _| {
                     if facing(i) {
@@ -182,7 +186,7 @@ impl PhotonMap {
                     }
                 });
             }
-            Storage::Compact => {
+            Record::Compact => {
                 let mut sums = BranchSums::default();
                 kdtree::for_each_within(&self.positions, &self.axes, p, r2, |i, _| {
                     if facing(i) {
@@ -210,9 +214,9 @@ impl PhotonMap {
     pub fn flux_of(&self, grid: &BinGrid, i: usize, out: &mut [f32]) {
         out.fill(0.0);
         let rec = &self.flux[i * self.stride..(i + 1) * self.stride];
-        match self.storage {
-            Storage::Full | Storage::Rgb => out.copy_from_slice(rec),
-            Storage::Compact => match decode_spike([rec[0], rec[1], rec[2]]) {
+        match self.record {
+            Record::Full => out.copy_from_slice(rec),
+            Record::Compact => match decode_spike([rec[0], rec[1], rec[2]]) {
                 Some((bin, a)) => out[bin] = a,
                 None => {
                     if let Some(s) = grid.smits() {

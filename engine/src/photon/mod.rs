@@ -7,5 +7,5 @@ pub mod record;
 pub mod trace;
 
 pub use map::{PhotonBatch, PhotonMap};
-pub use record::Storage;
+pub use record::{Record, Storage};
 pub use trace::{PhotonPass, PhotonSettings, TraceStop, split_dispersive, trace_photons};

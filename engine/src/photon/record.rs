@@ -16,16 +16,45 @@
 
 use glam::Vec3;
 
-/// Which flux format a photon map keeps.
+use crate::spectral::Transport;
+
+/// What the user chooses: the paper's three configurations. Each is a light transport
+/// (N spectral bins, or three RGB channels) paired with a record format; the tracer and
+/// the maps only see the two halves ([`Storage::transport`], [`Storage::record`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Storage {
-    /// N floats per photon.
+    /// Spectral transport, N floats per photon.
     Full,
-    /// Lai & Christensen's Algorithm 1: RGB triplet, or a lossless single-bin spike.
+    /// Spectral transport, Lai & Christensen's Algorithm 1: RGB triplet or lossless spike.
     Compact,
     /// The RGB renderer baseline: transport and storage in linear sRGB.
     Rgb,
+}
+
+/// How a photon's flux is kept in a map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Record {
+    /// Every channel as an f32 (N bins, or the three RGB channels).
+    Full,
+    /// Three f32: a Smits triplet whose decoded spectrum has the flux's colour, or the
+    /// spike `(-1, bin, amplitude)` for a single-bin flux. Needs a spectral grid.
+    Compact,
+}
+
+impl Record {
+    /// f32 flux values per photon for a grid of `channels` channels.
+    pub fn flux_stride(self, channels: usize) -> usize {
+        match self {
+            Record::Full => channels,
+            Record::Compact => 3,
+        }
+    }
+
+    /// Exact bytes per stored photon (header + flux + kd axis byte).
+    pub fn bytes_per_photon(self, channels: usize) -> usize {
+        size_of::<PhotonHeader>() + 4 * self.flux_stride(channels) + 1
+    }
 }
 
 impl Storage {
@@ -39,17 +68,31 @@ impl Storage {
 
     pub const ALL: [Storage; 3] = [Storage::Full, Storage::Compact, Storage::Rgb];
 
-    /// f32 flux values per photon for a grid of `bins` channels.
-    pub fn flux_stride(self, bins: usize) -> usize {
+    pub fn transport(self) -> Transport {
         match self {
-            Storage::Full => bins,
-            Storage::Compact | Storage::Rgb => 3,
+            Storage::Full | Storage::Compact => Transport::Spectral,
+            Storage::Rgb => Transport::Rgb,
         }
     }
 
-    /// Exact bytes per stored photon (header + flux + kd axis byte).
+    pub fn record(self) -> Record {
+        match self {
+            Storage::Full | Storage::Rgb => Record::Full,
+            Storage::Compact => Record::Compact,
+        }
+    }
+
+    /// Channels light is carried in when the user asks for `bins` bins (RGB: always 3).
+    pub fn channels(self, bins: usize) -> usize {
+        match self.transport() {
+            Transport::Spectral => bins,
+            Transport::Rgb => 3,
+        }
+    }
+
+    /// Exact bytes per stored photon at `bins` bins (header + flux + kd axis byte).
     pub fn bytes_per_photon(self, bins: usize) -> usize {
-        size_of::<PhotonHeader>() + 4 * self.flux_stride(bins) + 1
+        self.record().bytes_per_photon(self.channels(bins))
     }
 }
 

@@ -17,7 +17,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::map::{PhotonBatch, PhotonMap};
-use super::record::Storage;
+use super::record::Record;
 use crate::lights::spot_falloff;
 use crate::materials::{reflect, russian_roulette, scatter_dielectric};
 use crate::sampling::{
@@ -33,7 +33,7 @@ const CHUNK: usize = 1024;
 #[derive(Clone, Debug)]
 pub struct PhotonSettings {
     pub photons: usize,
-    pub storage: Storage,
+    pub record: Record,
     /// Safety cap on a photon's bounces (Russian roulette ends paths long before).
     pub max_bounces: u32,
     pub dispersion_split: usize,
@@ -51,10 +51,6 @@ pub struct PhotonPass {
     pub emitted: u64,
     pub splits: u64,
 }
-
-/// Cancelled by the caller.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Cancelled;
 
 /// Why a photon pass stopped early.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,7 +78,6 @@ pub fn trace_photons(
     pass: u64,
     cancel: &AtomicBool,
 ) -> Result<PhotonPass, TraceStop> {
-    let n = scene.bins();
     let chunks = settings.photons.div_ceil(CHUNK);
     let caustic = settings.caustic_map && scene.has_specular;
     let used = AtomicUsize::new(0);
@@ -93,8 +88,8 @@ pub fn trace_photons(
             if cancel.load(Ordering::Relaxed) || over.load(Ordering::Relaxed) {
                 return None;
             }
-            let mut global = PhotonBatch::new(settings.storage, n);
-            let mut caustics = PhotonBatch::new(settings.storage, n);
+            let mut global = PhotonBatch::new(settings.record, &scene.grid);
+            let mut caustics = PhotonBatch::new(settings.record, &scene.grid);
             let mut splits = 0;
             let start = c * CHUNK;
             let end = (start + CHUNK).min(settings.photons);
@@ -120,8 +115,8 @@ pub fn trace_photons(
     if over.load(Ordering::Relaxed) {
         return Err(TraceStop::OverBudget);
     }
-    let mut global = PhotonBatch::new(settings.storage, n);
-    let mut caustics = PhotonBatch::new(settings.storage, n);
+    let mut global = PhotonBatch::new(settings.record, &scene.grid);
+    let mut caustics = PhotonBatch::new(settings.record, &scene.grid);
     let mut splits = 0;
     for r in results {
         let (g, c, s) = r.ok_or(TraceStop::Cancelled)?;

@@ -2,9 +2,11 @@
 
 pub mod film;
 pub mod gather;
+pub mod run;
 pub mod session;
 pub mod settings;
 
 pub use film::{Film, Image};
-pub use session::{MemoryReport, Probe, RenderSession, RenderStats};
+pub use run::{ErrorReference, Flow, PassRecord, Stop, error_csv};
+pub use session::{MemoryReport, Probe, RenderError, RenderSession, RenderStats};
 pub use settings::{RenderSettings, SettingsError};

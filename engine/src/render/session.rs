@@ -16,11 +16,30 @@ use rayon::prelude::*;
 use super::film::{Film, Image};
 use super::gather::{Gather, Scratch};
 use super::settings::{RenderSettings, SettingsError, default_photon_budget};
-use crate::photon::TraceStop;
-use crate::photon::trace::Cancelled;
-use crate::photon::{PhotonSettings, Storage, trace_photons};
+use crate::photon::{PhotonPass, PhotonSettings, Storage, TraceStop, trace_photons};
 use crate::sampling::{Purpose, Rng};
 use crate::scene::{Scene, SpectralScene};
+
+/// Why a pass or a run did not finish.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RenderError {
+    /// The cancel flag was raised; the film is unchanged.
+    #[error("render cancelled")]
+    Cancelled,
+    /// Not even one photon's maps fit the photon budget.
+    #[error(
+        "the photon budget of {budget} bytes cannot hold the photon maps of a single photon; raise --photon-budget"
+    )]
+    OverBudget { budget: usize },
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
+    /// The error reference does not match the render.
+    #[error("reference image: {0}")]
+    Reference(#[from] crate::metrics::SizeMismatch),
+}
+
+/// A pass image (linear sRGB per pixel) and the probed pixels' spectra.
+type PassImage = (Vec<[f32; 3]>, Vec<(usize, Vec<f32>)>);
 
 /// Bytes of each part of a render, measured exactly.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -222,17 +241,40 @@ impl RenderSession {
         s
     }
 
-    /// Runs one pass; on cancel the film is unchanged.
-    pub fn run_pass(&mut self) -> Result<(), Cancelled> {
+    /// Runs one pass; on cancel (or when not even one photon fits the budget) the film is
+    /// unchanged.
+    pub fn run_pass(&mut self) -> Result<(), RenderError> {
         if INJECT_PANIC.load(Ordering::Relaxed) {
             panic!("injected fault (test)");
         }
         let start = Instant::now();
         let pass = self.film.passes() + 1;
-        let seed = self.settings.seed;
-        let scene = &*self.scene;
-        // Photons per pass, lowered to fit the photon-map budget: first from the previous
-        // pass's bytes per emitted photon, then by halving if a pass still overruns.
+        let (maps, photons) = self.trace_within_budget(pass)?;
+        let photon_done = Instant::now();
+        let (r_global, r_caustic) = self.radii(&maps);
+        let gather = Gather {
+            scene: &self.scene,
+            global: &maps.global,
+            caustic: maps.caustic.as_ref(),
+            r_global,
+            r_caustic,
+            final_gather_rays: self.settings.final_gather_rays,
+            max_bounces: self.settings.max_bounces,
+        };
+        let (image, probe_spectra) = self.gather_image(&gather, pass)?;
+        self.film.add_pass(&image);
+        self.add_probe_spectra(probe_spectra);
+        let times = (start, photon_done, Instant::now());
+        self.record_pass(&maps, photons, (r_global, r_caustic), times);
+        self.radius_sq_factor =
+            next_radius_sq_factor(self.radius_sq_factor, pass, self.settings.alpha);
+        Ok(())
+    }
+
+    /// Traces pass `pass`'s photons, lowering photons per pass to fit the photon-map
+    /// budget: first from the previous pass's bytes per emitted photon, then by halving if
+    /// a pass still overruns. Returns the maps and the photons emitted.
+    fn trace_within_budget(&mut self, pass: u64) -> Result<(PhotonPass, usize), RenderError> {
         let budget = self
             .settings
             .photon_budget_bytes
@@ -245,17 +287,18 @@ impl RenderSession {
         let maps = loop {
             let photon_settings = PhotonSettings {
                 photons,
-                storage: self.settings.storage,
+                record: self.settings.storage.record(),
                 max_bounces: self.settings.max_bounces,
                 dispersion_split: self.settings.dispersion_split,
                 caustic_map: true,
                 max_map_bytes: budget,
             };
-            match trace_photons(scene, &photon_settings, seed, pass, &self.cancel) {
+            let seed = self.settings.seed;
+            match trace_photons(&self.scene, &photon_settings, seed, pass, &self.cancel) {
                 Ok(m) => break m,
-                Err(TraceStop::Cancelled) => return Err(Cancelled),
+                Err(TraceStop::Cancelled) => return Err(RenderError::Cancelled),
                 Err(TraceStop::OverBudget) if photons > 1 => photons /= 2,
-                Err(TraceStop::OverBudget) => return Err(Cancelled),
+                Err(TraceStop::OverBudget) => return Err(RenderError::OverBudget { budget }),
             }
         };
         self.stats.budget_note = (photons < asked).then(|| {
@@ -264,10 +307,14 @@ impl RenderSession {
                 budget as f64 / 1e6
             )
         });
-        self.stats.photons_last_pass = photons as u64;
-        let photon_done = Instant::now();
+        Ok((maps, photons))
+    }
 
-        // First-pass radii: from the photons themselves unless the settings fix them.
+    /// This pass's gather radii: the first pass's (from the photons themselves unless the
+    /// settings fix them) shrunk by the Knaus–Zwicker factor, never below 1e-6 of the
+    /// scene's diagonal.
+    fn radii(&mut self, maps: &PhotonPass) -> (f32, f32) {
+        let scene = &self.scene;
         let fallback = || {
             let area = scene.diffuse_area.max(1e-12);
             let stored = maps.global.len().max(1) as f64;
@@ -285,27 +332,20 @@ impl RenderSession {
         {
             self.r1_caustic = c.typical_knn_radius(self.settings.caustic_k, 256);
         }
-        let diag = scene.diagonal().max(1e-6);
-        let r_min = 1e-6 * diag;
+        let r_min = 1e-6 * scene.diagonal().max(1e-6);
         let k = self.radius_sq_factor.sqrt() as f32;
         let r_global = (self.r1_global.unwrap_or_else(fallback) * k).max(r_min);
         let r_caustic = (self.r1_caustic.unwrap_or(r_global) * k).max(r_min);
+        (r_global, r_caustic)
+    }
 
-        let gather = Gather {
-            scene,
-            global: &maps.global,
-            caustic: maps.caustic.as_ref(),
-            r_global,
-            r_caustic,
-            final_gather_rays: self.settings.final_gather_rays,
-            max_bounces: self.settings.max_bounces,
-        };
+    /// One sample per pixel, rows in parallel; returns the pass image (linear sRGB) and the
+    /// probed pixels' spectra.
+    fn gather_image(&self, gather: &Gather, pass: u64) -> Result<PassImage, RenderError> {
         let (w, h) = (self.settings.width, self.settings.height);
-        let n = scene.bins();
-        let cancel = &self.cancel;
-        let probes = &self.probes;
-        type Row = (Vec<[f32; 3]>, Vec<(usize, Vec<f32>)>);
-        let rows: Vec<Option<Row>> = (0..h)
+        let (seed, n) = (self.settings.seed, self.scene.bins());
+        let (cancel, probes, grid) = (&self.cancel, &self.probes, &self.scene.grid);
+        let rows: Vec<Option<PassImage>> = (0..h)
             .into_par_iter()
             .map_init(
                 || (Scratch::new(n), vec![0.0f32; n]),
@@ -322,7 +362,7 @@ impl RenderSession {
                             if let Some(k) = probes.iter().position(|p| (p.x, p.y) == (x, y)) {
                                 spectra.push((k, radiance.clone()));
                             }
-                            scene.grid.to_linear_srgb(radiance)
+                            grid.to_linear_srgb(radiance)
                         })
                         .collect();
                     Some((row, spectra))
@@ -332,13 +372,16 @@ impl RenderSession {
         let mut image = Vec::with_capacity((w * h) as usize);
         let mut probe_spectra = Vec::new();
         for r in rows {
-            let (row, spectra) = r.ok_or(Cancelled)?;
+            let (row, spectra) = r.ok_or(RenderError::Cancelled)?;
             image.extend(row);
             probe_spectra.extend(spectra);
         }
-        self.film.add_pass(&image);
-        for (k, spectrum) in probe_spectra {
-            // Same rule as the film: a non-finite sample is dropped.
+        Ok((image, probe_spectra))
+    }
+
+    /// Adds a pass's probe spectra (same rule as the film: a non-finite sample is dropped).
+    fn add_probe_spectra(&mut self, spectra: Vec<(usize, Vec<f32>)>) {
+        for (k, spectrum) in spectra {
             let p = &mut self.probes[k];
             if spectrum.iter().all(|v| v.is_finite()) {
                 for (s, v) in p.sum.iter_mut().zip(&spectrum) {
@@ -347,11 +390,19 @@ impl RenderSession {
             }
             p.passes += 1;
         }
+    }
 
-        // Bookkeeping.
-        let end = Instant::now();
+    /// Bookkeeping after a pass: counts, times, radii, memory.
+    fn record_pass(
+        &mut self,
+        maps: &PhotonPass,
+        photons: usize,
+        (r_global, r_caustic): (f32, f32),
+        (start, photon_done, end): (Instant, Instant, Instant),
+    ) {
         let st = &mut self.stats;
         st.passes = self.film.passes();
+        st.photons_last_pass = photons as u64;
         st.photons_emitted += maps.emitted;
         st.stored_global = maps.global.len() as u64;
         st.stored_caustic = maps.caustic.as_ref().map_or(0, |c| c.len() as u64);
@@ -377,9 +428,6 @@ impl RenderSession {
         self.memory.caustic_map = maps.caustic.as_ref().map_or(0, |c| c.memory_bytes());
         self.memory.photon_maps = self.memory.global_map + self.memory.caustic_map;
         self.bytes_per_emitted = Some(self.memory.photon_maps as f64 / photons.max(1) as f64);
-        self.radius_sq_factor =
-            next_radius_sq_factor(self.radius_sq_factor, pass, self.settings.alpha);
-        Ok(())
     }
 
     /// Bytes per stored photon in the latest pass (records + search structure).

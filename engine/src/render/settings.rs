@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::photon::Storage;
-use crate::spectral::{BinGrid, GridError, MAX_BINS};
+use crate::spectral::{BinGrid, GridError, MAX_BINS, Transport};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RenderSettings {
@@ -45,13 +45,8 @@ pub const MIN_PHOTON_BUDGET: usize = 64 * 1024;
 
 /// A quarter of the machine's memory (Linux /proc/meminfo), else 4 GiB.
 pub fn default_photon_budget() -> usize {
-    std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|s| {
-            let line = s.lines().find(|l| l.starts_with("MemTotal:"))?;
-            let kb: usize = line.split_whitespace().nth(1)?.parse().ok()?;
-            Some(kb * 1024 / 4)
-        })
+    crate::metrics::total_memory_bytes()
+        .map(|b| (b / 4) as usize)
         .unwrap_or(4 << 30)
 }
 
@@ -79,12 +74,13 @@ impl Default for RenderSettings {
     }
 }
 
-/// A setting out of range, with the field, the value and the allowed range.
+/// A setting out of range, named by its command-line flag (the viewer's controls carry
+/// the same names in their tooltips), with the value and the allowed range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SettingsError {
-    #[error("{field} = {value}: {reason}")]
+    #[error("{flag} {value}: {reason}")]
     OutOfRange {
-        field: &'static str,
+        flag: &'static str,
         value: String,
         reason: String,
     },
@@ -92,9 +88,13 @@ pub enum SettingsError {
     Grid(#[from] GridError),
 }
 
-fn out_of_range(field: &'static str, value: impl ToString, reason: impl ToString) -> SettingsError {
+pub(crate) fn out_of_range(
+    flag: &'static str,
+    value: impl ToString,
+    reason: impl ToString,
+) -> SettingsError {
     SettingsError::OutOfRange {
-        field,
+        flag,
         value: value.to_string(),
         reason: reason.to_string(),
     }
@@ -109,9 +109,22 @@ pub const MAX_BOUNCES: u32 = 100_000;
 pub const MAX_SIDE: u32 = 16_384;
 /// Most photons per pass.
 pub const MAX_PHOTONS_PER_PASS: usize = 50_000_000;
+/// Most worker threads.
+pub const MAX_THREADS: usize = 1024;
+
+/// A preset's constructor.
+pub type Preset = fn() -> RenderSettings;
+
+/// The named presets, for `--preset` and the viewer.
+pub const PRESETS: [(&str, Preset); 4] = [
+    ("preview", RenderSettings::preview),
+    ("interactive", RenderSettings::interactive),
+    ("default", RenderSettings::default),
+    ("reference", RenderSettings::reference),
+];
 
 impl RenderSettings {
-    /// Fast and noisy: for the viewer's first seconds and for tests.
+    /// Fast and noisy: the viewer's quick first image and small tests.
     pub fn preview() -> Self {
         Self {
             photons_per_pass: 20_000,
@@ -122,87 +135,186 @@ impl RenderSettings {
         }
     }
 
+    /// The viewer's default: passes short enough to keep the image moving.
+    pub fn interactive() -> Self {
+        Self {
+            photons_per_pass: 50_000,
+            ..Self::default()
+        }
+    }
+
+    /// A converged image to measure others against: full storage, 100 bins, many photons.
+    pub fn reference() -> Self {
+        Self {
+            bins: 100,
+            storage: Storage::Full,
+            photons_per_pass: 200_000,
+            ..Self::default()
+        }
+    }
+
+    /// A preset by name (see [`PRESETS`]).
+    pub fn preset(name: &str) -> Result<Self, SettingsError> {
+        PRESETS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, f)| f())
+            .ok_or_else(|| {
+                let names: Vec<&str> = PRESETS.iter().map(|(n, _)| *n).collect();
+                out_of_range("--preset", name, format!("use one of {}", names.join(", ")))
+            })
+    }
+
+    /// The quick first image after a change, derived from these settings: a quarter of
+    /// the resolution, a tenth of the photons, no final gathering.
+    pub fn quick_preview_of(&self) -> Self {
+        Self {
+            width: self.width.div_ceil(4),
+            height: self.height.div_ceil(4),
+            photons_per_pass: (self.photons_per_pass / 10).max(1000),
+            final_gather_rays: 0,
+            ..self.clone()
+        }
+    }
+
+    /// Light channels these settings transport in (bins, or 3 for RGB).
+    pub fn channels(&self) -> usize {
+        self.storage.channels(self.bins)
+    }
+
+    /// Every check of every field; the error names the flag, the value and the range.
     pub fn validate(&self) -> Result<(), SettingsError> {
+        self.validate_image()?;
+        self.validate_photons()?;
+        self.validate_radii()?;
+        self.grid().map(|_| ()).map_err(SettingsError::from)
+    }
+
+    fn validate_image(&self) -> Result<(), SettingsError> {
         if self.storage != Storage::Rgb && (self.bins == 0 || self.bins > MAX_BINS) {
-            return Err(out_of_range(
-                "bins",
-                self.bins,
-                format!("must be between 1 and {MAX_BINS}"),
-            ));
+            let reason = format!("bins must be between 1 and {MAX_BINS}");
+            return Err(out_of_range("--bins", self.bins, reason));
         }
-        for (field, v) in [("width", self.width), ("height", self.height)] {
+        for v in [self.width, self.height] {
             if v == 0 || v > MAX_SIDE {
-                return Err(out_of_range(
-                    field,
-                    v,
-                    format!("must be between 1 and {MAX_SIDE}"),
-                ));
+                let size = format!("{}x{}", self.width, self.height);
+                let reason = format!("each side must be between 1 and {MAX_SIDE} pixels");
+                return Err(out_of_range("--size", size, reason));
             }
-        }
-        if self.photons_per_pass == 0 || self.photons_per_pass > MAX_PHOTONS_PER_PASS {
-            return Err(out_of_range(
-                "photons_per_pass",
-                self.photons_per_pass,
-                format!("must be between 1 and {MAX_PHOTONS_PER_PASS}"),
-            ));
         }
         if self.final_gather_rays > 1024 {
-            return Err(out_of_range(
-                "final_gather_rays",
-                self.final_gather_rays,
-                "must be at most 1024",
-            ));
+            let reason = "final-gather rays must be at most 1024";
+            return Err(out_of_range("--fg", self.final_gather_rays, reason));
         }
         if self.max_bounces == 0 || self.max_bounces > MAX_BOUNCES {
-            return Err(out_of_range(
-                "max_bounces",
-                self.max_bounces,
-                format!("must be between 1 and {MAX_BOUNCES}"),
-            ));
+            let reason = format!("the bounce cap must be between 1 and {MAX_BOUNCES}");
+            return Err(out_of_range("--max-bounces", self.max_bounces, reason));
         }
-        if !(self.alpha > 0.0 && self.alpha < 1.0) {
-            return Err(out_of_range("alpha", self.alpha, "must be in (0, 1)"));
-        }
-        for (field, r) in [
-            ("global_radius", self.global_radius),
-            ("caustic_radius", self.caustic_radius),
-        ] {
-            if let Some(r) = r
-                && !(r.is_finite() && r > 0.0)
-            {
-                return Err(out_of_range(field, r, "must be finite and > 0"));
-            }
-        }
-        for (field, k) in [("global_k", self.global_k), ("caustic_k", self.caustic_k)] {
-            if k == 0 || k > 10_000 {
-                return Err(out_of_range(field, k, "must be between 1 and 10000"));
-            }
+        Ok(())
+    }
+
+    fn validate_photons(&self) -> Result<(), SettingsError> {
+        if self.photons_per_pass == 0 || self.photons_per_pass > MAX_PHOTONS_PER_PASS {
+            let reason = format!("photons per pass must be between 1 and {MAX_PHOTONS_PER_PASS}");
+            return Err(out_of_range("--photons", self.photons_per_pass, reason));
         }
         if self.dispersion_split == 0 || self.dispersion_split > MAX_BINS {
-            return Err(out_of_range(
-                "dispersion_split",
-                self.dispersion_split,
-                format!("must be between 1 and {MAX_BINS}"),
-            ));
+            let reason = format!("the split count must be between 1 and {MAX_BINS}");
+            return Err(out_of_range("--split", self.dispersion_split, reason));
         }
         if let Some(b) = self.photon_budget_bytes
             && b < MIN_PHOTON_BUDGET
         {
-            return Err(out_of_range(
-                "photon_budget_bytes",
-                b,
-                format!("must be at least {MIN_PHOTON_BUDGET}"),
-            ));
+            let reason = format!(
+                "the photon budget must be at least {:.3} MB",
+                MIN_PHOTON_BUDGET as f64 / 1e6
+            );
+            return Err(out_of_range("--photon-budget", b as f64 / 1e6, reason));
         }
-        self.grid().map(|_| ()).map_err(SettingsError::from)
+        Ok(())
+    }
+
+    fn validate_radii(&self) -> Result<(), SettingsError> {
+        if !(self.alpha > 0.0 && self.alpha < 1.0) {
+            return Err(out_of_range("--alpha", self.alpha, "must be in (0, 1)"));
+        }
+        for (flag, r) in [
+            ("--global-radius", self.global_radius),
+            ("--caustic-radius", self.caustic_radius),
+        ] {
+            if let Some(r) = r
+                && !(r.is_finite() && r > 0.0)
+            {
+                return Err(out_of_range(flag, r, "a radius must be finite and > 0"));
+            }
+        }
+        for (flag, k) in [
+            ("--global-k", self.global_k),
+            ("--caustic-k", self.caustic_k),
+        ] {
+            if k == 0 || k > 10_000 {
+                return Err(out_of_range(
+                    flag,
+                    k,
+                    "neighbours must be between 1 and 10000",
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The bin grid these settings ask for.
     pub fn grid(&self) -> Result<BinGrid, GridError> {
-        match self.storage {
-            Storage::Rgb => Ok(BinGrid::rgb()),
-            _ => BinGrid::spectral(self.bins, self.lambda_min, self.lambda_max),
+        match self.storage.transport() {
+            Transport::Rgb => Ok(BinGrid::rgb()),
+            Transport::Spectral => BinGrid::spectral(self.bins, self.lambda_min, self.lambda_max),
         }
+    }
+}
+
+/// A photon budget given in megabytes (`--photon-budget`), as bytes.
+pub fn photon_budget_from_mb(mb: f64) -> Result<usize, SettingsError> {
+    if mb.is_finite() && mb > 0.0 && mb < 1e12 {
+        Ok((mb * 1e6) as usize)
+    } else {
+        Err(out_of_range(
+            "--photon-budget",
+            mb,
+            "must be a positive number of megabytes",
+        ))
+    }
+}
+
+/// Worker threads (`--threads`): the given count, or every core.
+pub fn thread_count(threads: Option<usize>) -> Result<usize, SettingsError> {
+    match threads {
+        Some(0) => Err(out_of_range(
+            "--threads",
+            0,
+            "at least one thread is needed",
+        )),
+        Some(t) if t > MAX_THREADS => Err(out_of_range(
+            "--threads",
+            t,
+            format!("at most {MAX_THREADS}"),
+        )),
+        Some(t) => Ok(t),
+        None => Ok(std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)),
+    }
+}
+
+/// An exposure multiplier for display (`--exposure`): finite and > 0.
+pub fn validate_exposure(exposure: f32) -> Result<f32, SettingsError> {
+    if exposure.is_finite() && exposure > 0.0 {
+        Ok(exposure)
+    } else {
+        Err(out_of_range(
+            "--exposure",
+            exposure,
+            "must be finite and > 0",
+        ))
     }
 }
 
@@ -212,8 +324,39 @@ mod tests {
 
     #[test]
     fn presets_are_valid_and_absurd_values_are_named() {
-        RenderSettings::default().validate().unwrap();
-        RenderSettings::preview().validate().unwrap();
+        for (name, preset) in PRESETS {
+            preset().validate().unwrap();
+            assert_eq!(RenderSettings::preset(name).unwrap(), preset());
+        }
+        assert!(
+            RenderSettings::preset("fast")
+                .unwrap_err()
+                .to_string()
+                .contains("interactive")
+        );
+        RenderSettings::default()
+            .quick_preview_of()
+            .validate()
+            .unwrap();
+        let bad = RenderSettings {
+            photons_per_pass: 0,
+            ..RenderSettings::default()
+        };
+        let msg = bad.validate().unwrap_err().to_string();
+        assert!(msg.starts_with("--photons 0:"), "{msg}");
+        assert!(
+            photon_budget_from_mb(-1.0)
+                .unwrap_err()
+                .to_string()
+                .contains("--photon-budget")
+        );
+        assert!(thread_count(Some(0)).is_err() && thread_count(None).unwrap() >= 1);
+        assert!(
+            validate_exposure(f32::NAN)
+                .unwrap_err()
+                .to_string()
+                .contains("--exposure")
+        );
         let bad = RenderSettings {
             bins: 0,
             ..RenderSettings::default()
@@ -229,7 +372,12 @@ mod tests {
             width: 0,
             ..RenderSettings::default()
         };
-        assert!(bad.validate().unwrap_err().to_string().contains("width"));
+        assert!(
+            bad.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("--size 0x256")
+        );
         let bad = RenderSettings {
             global_radius: Some(f32::NAN),
             ..RenderSettings::default()

@@ -145,6 +145,11 @@ pub const BUILTIN: &[(&str, &[u8])] = &[
 /// The scene the viewer and `prismap render` open when none is given.
 pub const DEFAULT_SCENE: &str = "prism";
 
+/// The bytes of a built-in scene, if `name` is one.
+pub fn builtin(name: &str) -> Option<&'static [u8]> {
+    BUILTIN.iter().find(|(n, _)| *n == name).map(|(_, b)| *b)
+}
+
 /// Loads a built-in scene by name ("prism", "cornell-box", "cornell-blackbody").
 pub fn load_builtin(name: &str) -> Result<Scene, SceneError> {
     let (stem, bytes) =

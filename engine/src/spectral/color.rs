@@ -49,6 +49,13 @@ pub fn srgb_encode(v: f32) -> f32 {
     }
 }
 
+/// One linear channel as an 8-bit sRGB value (clamped, rounded): the one encoder of
+/// PNGs, the viewer's texture, the report's plots and the probe's swatches.
+#[inline]
+pub fn srgb8(v: f32) -> u8 {
+    (srgb_encode(v) * 255.0 + 0.5) as u8
+}
+
 /// Inverse of [`srgb_encode`].
 pub fn srgb_decode(v: f32) -> f32 {
     if v <= 0.04045 {

@@ -1,0 +1,241 @@
+//! The command line's arguments (clap) and their parsers. Defaults come from the engine's
+//! [`RenderSettings`] presets; every check of a value is the engine's (its errors name
+//! the flag), so the CLI only parses and wires.
+
+pub mod commands;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+
+use crate::photon::Storage;
+use crate::render::RenderSettings;
+use crate::scene;
+
+#[derive(Parser)]
+#[command(
+    name = "prismap",
+    version,
+    about = "Interactive spectral photon mapping"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Open the interactive viewer (the default when a display is available).
+    View(ViewArgs),
+    /// Render a scene headless to PNG or EXR.
+    Render(Box<RenderArgs>),
+    /// Measure speed against error per bin count and storage (the paper's tables, and more).
+    Report(ReportArgs),
+    /// List the built-in scenes, glasses and setting presets.
+    List,
+}
+
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// A .gltf/.glb file, or a built-in scene name (prism, cornell-box, cornell-blackbody).
+    #[arg(default_value = scene::DEFAULT_SCENE)]
+    pub scene: String,
+    /// Start from a named preset (preview, interactive, default, reference); the other
+    /// flags override it.
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Wavelength bins (1–4096; ignored by --storage rgb).
+    #[arg(long)]
+    pub bins: Option<usize>,
+    /// Photon storage: full (N floats), compact (RGB triplet or spike) or rgb (RGB renderer).
+    #[arg(long, value_parser = parse_storage)]
+    pub storage: Option<Storage>,
+    /// Photons emitted per pass.
+    #[arg(long)]
+    pub photons: Option<usize>,
+    /// Number of passes (default 16 unless --seconds is given).
+    #[arg(long)]
+    pub passes: Option<u64>,
+    /// Render passes until this many seconds have passed (at least one pass; with
+    /// --passes, whichever comes first).
+    #[arg(long, allow_negative_numbers = true)]
+    pub seconds: Option<f64>,
+    /// Image size WxH.
+    #[arg(long, value_parser = parse_size, allow_hyphen_values = true)]
+    pub size: Option<(u32, u32)>,
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Final-gather rays per pixel per pass (0: show the global photon map directly).
+    #[arg(long)]
+    pub fg: Option<u32>,
+    /// Most single-wavelength photons one photon splits into at dispersive glass.
+    #[arg(long)]
+    pub split: Option<usize>,
+    /// Safety cap on any path's bounces (Russian roulette ends paths long before).
+    #[arg(long)]
+    pub max_bounces: Option<u32>,
+    /// Knaus–Zwicker radius reduction α in (0, 1).
+    #[arg(long, allow_negative_numbers = true)]
+    pub alpha: Option<f64>,
+    /// First-pass gather radius of the global map, in scene units (default: estimated).
+    #[arg(long, allow_negative_numbers = true)]
+    pub global_radius: Option<f32>,
+    /// First-pass gather radius of the caustic map, in scene units (default: estimated).
+    #[arg(long, allow_negative_numbers = true)]
+    pub caustic_radius: Option<f32>,
+    /// Most megabytes one pass's photon maps may take (default: a quarter of RAM);
+    /// photons per pass are lowered to fit.
+    #[arg(long, allow_negative_numbers = true)]
+    pub photon_budget: Option<f64>,
+    /// Exposure multiplier for the PNG (EXR is written linear, unscaled).
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    pub exposure: f32,
+    /// Output image: .png (sRGB) or .exr (linear sRGB). Default: SCENE.png.
+    #[arg(short = 'o', long)]
+    pub output: Option<PathBuf>,
+    /// Write render statistics as JSON here.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    /// A reference EXR: with --error-csv, log PSNR against it after every pass.
+    #[arg(long, requires = "error_csv")]
+    pub reference: Option<PathBuf>,
+    /// Write "pass,seconds,photons,psnr_db" after every pass (needs --reference).
+    #[arg(long, requires = "reference")]
+    pub error_csv: Option<PathBuf>,
+}
+
+impl RenderArgs {
+    /// The preset (or the defaults) with every given flag applied, validated.
+    pub fn settings(&self) -> Result<RenderSettings> {
+        let base = match &self.preset {
+            Some(p) => RenderSettings::preset(p)?,
+            None => RenderSettings::default(),
+        };
+        let s = RenderSettings {
+            bins: self.bins.unwrap_or(base.bins),
+            storage: self.storage.unwrap_or(base.storage),
+            photons_per_pass: self.photons.unwrap_or(base.photons_per_pass),
+            width: self.size.map_or(base.width, |s| s.0),
+            height: self.size.map_or(base.height, |s| s.1),
+            seed: self.seed.unwrap_or(base.seed),
+            final_gather_rays: self.fg.unwrap_or(base.final_gather_rays),
+            dispersion_split: self.split.unwrap_or(base.dispersion_split),
+            max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
+            alpha: self.alpha.unwrap_or(base.alpha),
+            global_radius: self.global_radius.or(base.global_radius),
+            caustic_radius: self.caustic_radius.or(base.caustic_radius),
+            photon_budget_bytes: match self.photon_budget {
+                Some(mb) => Some(crate::render::settings::photon_budget_from_mb(mb)?),
+                None => base.photon_budget_bytes,
+            },
+            ..base
+        };
+        s.validate()?;
+        Ok(s)
+    }
+}
+
+#[derive(clap::Args)]
+pub struct ViewArgs {
+    /// A .gltf/.glb file, or a built-in scene name.
+    #[arg(default_value = scene::DEFAULT_SCENE)]
+    pub scene: String,
+    #[arg(long, default_value_t = RenderSettings::interactive().bins)]
+    pub bins: usize,
+    #[arg(long, default_value = "compact", value_parser = parse_storage)]
+    pub storage: Storage,
+    #[arg(long, default_value_t = RenderSettings::interactive().photons_per_pass)]
+    pub photons: usize,
+    #[arg(long, default_value = "256x256", value_parser = parse_size, allow_hyphen_values = true)]
+    pub size: (u32, u32),
+    /// Save a screenshot of the whole window here after --after-passes passes, then exit.
+    #[arg(long)]
+    pub screenshot: Option<PathBuf>,
+    #[arg(long, default_value_t = 8)]
+    pub after_passes: u64,
+    /// Probe this pixel from the start, as X,Y.
+    #[arg(long, value_parser = parse_pixel)]
+    pub probe: Option<(u32, u32)>,
+}
+
+#[derive(clap::Args)]
+pub struct ReportArgs {
+    /// Small images and short runs: under 10 minutes on 2 cores.
+    #[arg(long)]
+    pub quick: bool,
+    /// Scenes (built-in names or files); default: cornell-box cornell-blackbody prism.
+    #[arg(long, num_args = 1..)]
+    pub scenes: Vec<String>,
+    /// Folder for report.md, runs.csv, plots and the cached references.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
+    let (x, y) = s
+        .split_once(',')
+        .ok_or_else(|| format!("pixel '{s}' must look like 120,64"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("pixel '{s}': '{v}' is not a whole number"))
+    };
+    Ok((p(x)?, p(y)?))
+}
+
+fn parse_storage(s: &str) -> Result<Storage, String> {
+    s.parse()
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("size '{s}' must look like 256x256"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("size '{s}': '{v}' is not a positive whole number"))
+    };
+    Ok((p(w)?, p(h)?))
+}
+
+/// Checks that `path` can be written before any work is done.
+pub fn check_writable(path: &Path, extensions: &[&str]) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !extensions.iter().any(|e| Some(*e) == ext.as_deref()) {
+        let list: Vec<String> = extensions.iter().map(|e| format!(".{e}")).collect();
+        bail!(
+            "{}: the file must end in {}",
+            path.display(),
+            list.join(" or ")
+        );
+    }
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        bail!(
+            "{}: the folder {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    let probe = dir.join(format!(".prismap-write-test-{}", std::process::id()));
+    std::fs::write(&probe, b"").with_context(|| {
+        format!(
+            "{}: the folder {} is not writable",
+            path.display(),
+            dir.display()
+        )
+    })?;
+    let _ = std::fs::remove_file(probe);
+    Ok(())
+}
