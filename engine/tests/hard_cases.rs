@@ -346,7 +346,7 @@ fn mutated_scene_files_never_panic() {
 }
 
 #[test]
-fn glass_only_scene_without_light_is_refused_and_negative_light_too() {
+fn a_black_clamped_negative_emitter_renders_finite_and_black() {
     let s = Scene {
         name: "dark".into(),
         triangles: vec![[Vec3::ZERO, Vec3::X, Vec3::Y]],

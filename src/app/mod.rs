@@ -23,14 +23,7 @@ use crate::spectral::Spectrum;
 use orbit::Orbit;
 use worker::{Command, Snapshot, Worker};
 
-/// How linear radiance becomes display values.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ToneMap {
-    /// Exposure, then clip at 1.
-    Clamp,
-    /// Exposure, then x / (1 + x) per channel.
-    Reinhard,
-}
+pub use crate::output::ToneMap;
 
 /// A request to save a screenshot of the window after some passes, then quit.
 #[derive(Clone, Debug)]
@@ -321,17 +314,7 @@ impl ViewerApp {
         let path = self.save_dir.join(name);
         let result = if ext == "png" {
             let bytes = tone_map(&snap.image, self.exposure, self.tone);
-            crate::output::write_atomic(&path, |tmp| {
-                image::save_buffer_with_format(
-                    tmp,
-                    &bytes,
-                    snap.image.width,
-                    snap.image.height,
-                    image::ExtendedColorType::Rgb8,
-                    image::ImageFormat::Png,
-                )
-                .map_err(|e| e.to_string())
-            })
+            crate::output::write_png8(&path, &bytes, snap.image.width, snap.image.height)
         } else {
             crate::output::write_exr(&path, &snap.image)
         };
@@ -406,17 +389,7 @@ impl ViewerApp {
             ctx.request_screenshot(move |img| {
                 let [w, h] = img.size;
                 let rgba: Vec<u8> = img.pixels.iter().flat_map(|c| c.to_array()).collect();
-                let r = crate::output::write_atomic(&path, |tmp| {
-                    image::save_buffer_with_format(
-                        tmp,
-                        &rgba,
-                        w as u32,
-                        h as u32,
-                        image::ExtendedColorType::Rgba8,
-                        image::ImageFormat::Png,
-                    )
-                    .map_err(|e| e.to_string())
-                });
+                let r = crate::output::write_png8(&path, &rgba, w as u32, h as u32);
                 if let Err(e) = r {
                     *err.lock()
                         .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(e.to_string());
@@ -468,21 +441,7 @@ impl eframe::App for ViewerApp {
 
 /// Display bytes (RGB8, sRGB-encoded) of a linear image.
 pub fn tone_map(image: &Image, exposure: f32, tone: ToneMap) -> Vec<u8> {
-    use crate::spectral::color::srgb_encode;
-    image
-        .pixels
-        .iter()
-        .flat_map(|p| {
-            p.map(|v| {
-                let v = v * exposure;
-                let v = match tone {
-                    ToneMap::Clamp => v,
-                    ToneMap::Reinhard => v.max(0.0) / (1.0 + v.max(0.0)),
-                };
-                (srgb_encode(v) * 255.0 + 0.5) as u8
-            })
-        })
-        .collect()
+    crate::output::to_display8(image, exposure, tone)
 }
 
 /// The bin count the viewer picks on "auto", and why.

@@ -5,10 +5,9 @@ use egui_plot::{Line, Plot, PlotPoints, Polygon};
 
 use super::{SceneSource, ToneMap, ViewerApp};
 use crate::photon::Storage;
-use crate::spectral::color::{SRGB_TO_XYZ, XYZ_TO_SRGB, dominant_wavelength, mul3, srgb_encode};
+use crate::spectral::color::{SRGB_TO_XYZ, XYZ_TO_SRGB, dominant_wavelength, mul3, srgb8};
 
 /// The paper's bin counts.
-const PRESETS: [usize; 7] = [4, 5, 6, 8, 10, 20, 100];
 const SIZES: [u32; 5] = [128, 256, 384, 512, 768];
 
 pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
@@ -76,7 +75,7 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         restart = true;
                     }
                     ui.horizontal_wrapped(|ui| {
-                        for p in PRESETS {
+                        for p in crate::spectral::PAPER_BINS {
                             if ui
                                 .selectable_label(
                                     !app.auto_bins && app.settings.bins == p,
@@ -263,16 +262,14 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 };
                 ui.label(RichText::new("same photons, other storage:").small());
                 for other in Storage::ALL {
-                    let b = stored
-                        * other.bytes_per_photon(if other == Storage::Rgb { 3 } else { bins })
-                            as f64;
+                    let b = stored * other.bytes_per_photon(bins) as f64;
                     let here = other == app.settings.storage;
                     let text = format!(
                         "{}{:<8} {} ({} B/photon{})",
                         if here { "> " } else { "  " },
                         other.name(),
                         format_bytes(b),
-                        other.bytes_per_photon(if other == Storage::Rgb { 3 } else { bins }),
+                        other.bytes_per_photon(bins),
                         if other == Storage::Full {
                             format!(", {bins} bins")
                         } else {
@@ -330,7 +327,7 @@ fn wavelength_colour(l: f64) -> Color32 {
     let rgb = mul3(&XYZ_TO_SRGB, [c.x.eval(l), c.y.eval(l), c.z.eval(l)]).map(|v| v.max(0.0));
     let m = rgb.iter().cloned().fold(1e-9, f64::max);
     let bright = (c.y.eval(l) / 0.3).min(1.0).sqrt().max(0.15);
-    let [r, g, b] = rgb.map(|v| (srgb_encode((v / m * bright) as f32) * 255.0) as u8);
+    let [r, g, b] = rgb.map(|v| srgb8((v / m * bright) as f32));
     Color32::from_rgb(r, g, b)
 }
 
@@ -383,8 +380,7 @@ pub fn probe(app: &mut ViewerApp, ui: &mut egui::Ui) {
                             },
                         );
                         let xyz = mul3(&SRGB_TO_XYZ, lin);
-                        let disp = lin
-                            .map(|v| (srgb_encode(v as f32 * app.exposure) * 255.0).round() as u8);
+                        let disp = lin.map(|v| srgb8(v as f32 * app.exposure));
                         let pixel = snap
                             .image
                             .get(x.min(snap.image.width - 1), y.min(snap.image.height - 1));

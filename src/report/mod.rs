@@ -23,7 +23,7 @@ use crate::render::RenderSettings;
 use child::{Job, Limit};
 
 /// The bin counts of the paper's tables.
-pub const BINS: [usize; 7] = [4, 5, 6, 8, 10, 20, 100];
+pub const BINS: [usize; 7] = crate::spectral::PAPER_BINS;
 
 /// The paper's Table 1 (blackbody Cornell box): bins, full PSNR, compact PSNR (dB).
 pub const PAPER_TABLE1: [(usize, f64, f64); 7] = [

@@ -11,6 +11,48 @@ pub struct Hit {
     pub prim: u32,
 }
 
+/// A triangle with what shading needs precomputed.
+#[derive(Clone, Copy, Debug)]
+pub struct TriData {
+    pub v0: Vec3,
+    pub e1: Vec3,
+    pub e2: Vec3,
+    /// Unit geometric normal (front face: counter-clockwise winding).
+    pub normal: Vec3,
+    pub area: f32,
+    pub material: u32,
+}
+
+/// Where a ray met a surface, with the normals shading needs: the one surface-hit type of
+/// the photon tracer and the gather.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceHit {
+    pub p: Vec3,
+    /// Geometric normal (front face: counter-clockwise winding).
+    pub n: Vec3,
+    /// `n` turned towards the side the ray came from.
+    pub nf: Vec3,
+    /// Whether the ray hit the front face.
+    pub front: bool,
+    pub material: u32,
+}
+
+impl SurfaceHit {
+    /// The hit of the ray `origin + t·dir` with `tri` at distance `t`.
+    #[inline]
+    pub fn new(tri: &TriData, origin: Vec3, dir: Vec3, t: f32) -> Self {
+        let n = tri.normal;
+        let front = dir.dot(n) < 0.0;
+        Self {
+            p: origin + dir * t,
+            n,
+            nf: if front { n } else { -n },
+            front,
+            material: tri.material,
+        }
+    }
+}
+
 /// The scene's triangles in a compressed wide BVH (obvhs' CWBVH, medium build).
 pub struct Accel {
     bvh: CwBvh,

@@ -1,6 +1,244 @@
-//! Light sources: what they emit and how they fall off. Angles of narrow cones are kept
-//! as 1 − cos θ (see [`crate::sampling::one_minus_cos`]), never as cos θ, so a 0.01° spot
-//! is as precise as a 30° one.
+//! Light sources: what they emit, how photons leave them, and how a surface point samples
+//! them for direct light. Angles of narrow cones are kept as 1 − cos θ (see
+//! [`crate::sampling::one_minus_cos`]), never as cos θ, so a 0.01° spot is as precise as a
+//! 30° one.
+
+use glam::Vec3;
+
+use crate::geometry::{Accel, TriData};
+use crate::sampling::{
+    Rng, cdf, cosine_hemisphere, one_minus_cos_between, sample_cdf, uniform_cone, uniform_sphere,
+    uniform_triangle,
+};
+use crate::spectral::spd;
+
+#[derive(Clone, Debug)]
+pub enum LightKind {
+    /// An emissive triangle (one-sided, Lambertian).
+    Area {
+        tri: u32,
+    },
+    Point {
+        position: Vec3,
+    },
+    Spot {
+        position: Vec3,
+        axis: Vec3,
+        /// 1 − cos of the outer and inner cone angles (precise for narrow cones).
+        omc_outer: f32,
+        omc_inner: f32,
+    },
+}
+
+#[derive(Clone, Debug)]
+pub struct Light {
+    pub kind: LightKind,
+    /// Per-bin emitted radiance (area) or intensity (punctual).
+    pub spectrum: Vec<f32>,
+    /// Emitted power as luminance (Y), for choosing lights.
+    pub power: f32,
+}
+
+/// A photon as it leaves a light: flux already divided by the photon count and the
+/// light's selection probability.
+pub struct Emitted {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub flux: Vec<f32>,
+}
+
+/// The scene's lights with their two selection distributions: photon emission (half by
+/// power, half evenly over light groups, so a small bright spot next to a large dim panel
+/// still gets photons for its caustic) and direct lighting (by power).
+pub struct LightSet {
+    lights: Vec<Light>,
+    emit_pmf: Vec<f32>,
+    emit_cdf: Vec<f32>,
+    direct_pmf: Vec<f32>,
+    direct_cdf: Vec<f32>,
+}
+
+impl LightSet {
+    /// All area triangles of one material count as one group; punctual lights are their
+    /// own groups.
+    pub fn new(lights: Vec<Light>, tris: &[TriData]) -> Self {
+        let total: f64 = lights.iter().map(|l| l.power as f64).sum();
+        let group_key = |i: usize, l: &Light| match l.kind {
+            LightKind::Area { tri } => tris[tri as usize].material as usize,
+            _ => usize::MAX - i,
+        };
+        let mut groups: Vec<(usize, f64)> = Vec::new();
+        let mut light_group = Vec::with_capacity(lights.len());
+        for (i, l) in lights.iter().enumerate() {
+            let key = group_key(i, l);
+            let idx = groups
+                .iter()
+                .position(|(k, _)| *k == key)
+                .unwrap_or_else(|| {
+                    groups.push((key, 0.0));
+                    groups.len() - 1
+                });
+            groups[idx].1 += l.power as f64;
+            light_group.push(idx);
+        }
+        let emit_pmf: Vec<f32> = lights
+            .iter()
+            .zip(&light_group)
+            .map(|(l, &g)| {
+                let by_power = l.power as f64 / total;
+                let in_group = l.power as f64 / groups[g].1;
+                (0.5 * by_power + 0.5 * in_group / groups.len() as f64) as f32
+            })
+            .collect();
+        let direct_pmf: Vec<f32> = lights
+            .iter()
+            .map(|l| (l.power as f64 / total) as f32)
+            .collect();
+        Self {
+            emit_cdf: cdf(&emit_pmf),
+            direct_cdf: cdf(&direct_pmf),
+            emit_pmf,
+            direct_pmf,
+            lights,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.lights.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.lights.is_empty()
+    }
+
+    pub fn iter(&self) -> std::slice::Iter<'_, Light> {
+        self.lights.iter()
+    }
+
+    /// Probability that a photon leaves light `i`.
+    pub fn emit_pmf(&self, i: usize) -> f32 {
+        self.emit_pmf[i]
+    }
+
+    /// Chooses a light and emits one of `photons` photons from it.
+    pub fn emit(
+        &self,
+        tris: &[TriData],
+        accel: &Accel,
+        photons: usize,
+        rng: &mut Rng,
+    ) -> Option<Emitted> {
+        if self.lights.is_empty() {
+            return None;
+        }
+        let li = sample_cdf(&self.emit_cdf, rng.next_f32());
+        let (light, pmf) = (&self.lights[li], self.emit_pmf[li]);
+        if !(pmf > 0.0) {
+            return None;
+        }
+        let (origin, dir, weight) = match light.kind {
+            LightKind::Area { tri } => {
+                let t = &tris[tri as usize];
+                let (b1, b2) = uniform_triangle(rng.next_2d());
+                let p = t.v0 + t.e1 * b1 + t.e2 * b2;
+                let dir = cosine_hemisphere(t.normal, rng.next_2d());
+                let origin = accel.offset(p, t.normal, dir);
+                (origin, dir, std::f32::consts::PI * t.area)
+            }
+            LightKind::Point { position } => (
+                position,
+                uniform_sphere(rng.next_2d()),
+                4.0 * std::f32::consts::PI,
+            ),
+            LightKind::Spot {
+                position,
+                axis,
+                omc_outer,
+                omc_inner,
+            } => {
+                let dir = uniform_cone(axis, omc_outer, rng.next_2d());
+                let solid_angle = 2.0 * std::f32::consts::PI * omc_outer;
+                let falloff = spot_falloff(one_minus_cos_between(dir, axis), omc_outer, omc_inner);
+                (position, dir, solid_angle * falloff)
+            }
+        };
+        let mut flux = light.spectrum.clone();
+        spd::scale(&mut flux, weight / (pmf * photons as f32));
+        Some(Emitted { origin, dir, flux })
+    }
+
+    /// Irradiance (N bins) at `p` (facing normal `nf`) from one light sample with a shadow
+    /// ray, into `out`; zero when the sample is occluded or faces away.
+    pub fn direct(
+        &self,
+        tris: &[TriData],
+        accel: &Accel,
+        p: Vec3,
+        nf: Vec3,
+        rng: &mut Rng,
+        out: &mut [f32],
+    ) {
+        out.fill(0.0);
+        if self.lights.is_empty() {
+            return;
+        }
+        let li = sample_cdf(&self.direct_cdf, rng.next_f32());
+        let (light, pmf) = (&self.lights[li], self.direct_pmf[li]);
+        let uv = rng.next_2d();
+        if !(pmf > 0.0) {
+            return;
+        }
+        let Some((target, weight)) = sample_towards(light, tris, p, uv) else {
+            return;
+        };
+        let w = target - p;
+        let dist = w.length();
+        let wn = w / dist;
+        let cos_x = nf.dot(wn);
+        if !(cos_x > 0.0 && weight.is_finite() && weight > 0.0) {
+            return;
+        }
+        let origin = accel.offset(p, nf, wn);
+        if accel.occluded(origin, wn, dist * (1.0 - 1e-4)) {
+            return;
+        }
+        out.copy_from_slice(&light.spectrum);
+        spd::scale(out, cos_x * weight / pmf);
+    }
+}
+
+/// A point on `light` seen from `p` and its geometry weight (irradiance per unit
+/// radiance or intensity, before the receiver's cosine); None when it emits nothing
+/// towards `p`.
+fn sample_towards(light: &Light, tris: &[TriData], p: Vec3, uv: [f32; 2]) -> Option<(Vec3, f32)> {
+    match light.kind {
+        LightKind::Area { tri } => {
+            let t = &tris[tri as usize];
+            let (b1, b2) = uniform_triangle(uv);
+            let y = t.v0 + t.e1 * b1 + t.e2 * b2;
+            let w = y - p;
+            let d2 = w.length_squared();
+            let cos_l = -t.normal.dot(w / d2.sqrt());
+            (cos_l > 0.0).then_some((y, cos_l * t.area / d2))
+        }
+        LightKind::Point { position } => Some((position, 1.0 / (position - p).length_squared())),
+        LightKind::Spot {
+            position,
+            axis,
+            omc_outer,
+            omc_inner,
+        } => {
+            let w = p - position;
+            let d2 = w.length_squared();
+            let f = spot_falloff(
+                one_minus_cos_between(w / d2.sqrt(), axis),
+                omc_outer,
+                omc_inner,
+            );
+            (f > 0.0).then_some((position, f / d2))
+        }
+    }
+}
 
 /// glTF's spot falloff: smooth (squared linear ramp) between the cone angles, a hard
 /// edge when they coincide. Every angle is given as 1 − cos θ: `omc` of the direction,

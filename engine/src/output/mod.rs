@@ -51,27 +51,60 @@ pub fn write_atomic(
     })
 }
 
-/// 8-bit sRGB pixels (exposure applied, clamped).
-pub fn to_srgb8(image: &Image, exposure: f32) -> Vec<u8> {
+/// How linear radiance becomes display values.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ToneMap {
+    /// Exposure, then clip at 1.
+    #[default]
+    Clamp,
+    /// Exposure, then x / (1 + x) per channel.
+    Reinhard,
+}
+
+impl ToneMap {
+    #[inline]
+    pub fn apply(self, v: f32) -> f32 {
+        match self {
+            ToneMap::Clamp => v,
+            ToneMap::Reinhard => v.max(0.0) / (1.0 + v.max(0.0)),
+        }
+    }
+}
+
+/// 8-bit sRGB pixels, RGB interleaved (exposure and tone map applied).
+pub fn to_display8(image: &Image, exposure: f32, tone: ToneMap) -> Vec<u8> {
     image
         .pixels
         .iter()
-        .flat_map(|p| p.map(|v| srgb8(v * exposure)))
+        .flat_map(|p| p.map(|v| srgb8(tone.apply(v * exposure))))
         .collect()
+}
+
+/// 8-bit sRGB pixels (exposure applied, clamped).
+pub fn to_srgb8(image: &Image, exposure: f32) -> Vec<u8> {
+    to_display8(image, exposure, ToneMap::Clamp)
 }
 
 pub fn write_png(path: &Path, image: &Image, exposure: f32) -> Result<(), OutputError> {
     let bytes = to_srgb8(image, exposure);
+    write_png8(path, &bytes, image.width, image.height)
+}
+
+/// Writes 8-bit pixels as a PNG, atomically: RGB when `bytes` holds 3 per pixel, RGBA
+/// when it holds 4.
+pub fn write_png8(path: &Path, bytes: &[u8], width: u32, height: u32) -> Result<(), OutputError> {
+    let pixels = width as usize * height as usize;
+    let colour = match bytes.len().checked_div(pixels) {
+        Some(3) => image::ExtendedColorType::Rgb8,
+        Some(4) => image::ExtendedColorType::Rgba8,
+        _ => {
+            let message = format!("{} bytes for {width}x{height} pixels", bytes.len());
+            return Err(write_err(path, message));
+        }
+    };
     write_atomic(path, |tmp| {
-        image::save_buffer_with_format(
-            tmp,
-            &bytes,
-            image.width,
-            image.height,
-            image::ExtendedColorType::Rgb8,
-            image::ImageFormat::Png,
-        )
-        .map_err(|e| e.to_string())
+        image::save_buffer_with_format(tmp, bytes, width, height, colour, image::ImageFormat::Png)
+            .map_err(|e| e.to_string())
     })
 }
 

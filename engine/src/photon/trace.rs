@@ -18,13 +18,9 @@ use rayon::prelude::*;
 
 use super::map::{PhotonBatch, PhotonMap};
 use super::record::Record;
-use crate::lights::spot_falloff;
 use crate::materials::{reflect, russian_roulette, scatter_dielectric};
-use crate::sampling::{
-    Purpose, Rng, cosine_hemisphere, one_minus_cos_between, sample_cdf, uniform_cone,
-    uniform_sphere, uniform_triangle,
-};
-use crate::scene::{LightKind, SpectralScene, SurfaceKind};
+use crate::sampling::{Purpose, Rng, cosine_hemisphere};
+use crate::scene::{SpectralScene, SurfaceKind};
 use crate::spectral::spd;
 
 /// Photons traced per work item (fixed, so results do not depend on the thread count).
@@ -148,24 +144,31 @@ fn trace_one(
     global: &mut PhotonBatch,
     caustics: &mut PhotonBatch,
 ) -> u64 {
-    let Some(first) = emit(scene, settings.photons, rng) else {
+    let Some(e) = scene
+        .lights
+        .emit(&scene.tris, &scene.accel, settings.photons, rng)
+    else {
         return 0;
+    };
+    let first = Path {
+        origin: e.origin,
+        dir: e.dir,
+        flux: e.flux,
+        depth: 0,
+        diffuse_seen: false,
+        specular_seen: false,
     };
     let grid = &scene.grid;
     let mut splits = 0;
     let mut stack = vec![first];
     while let Some(mut path) = stack.pop() {
         while path.depth < settings.max_bounces {
-            let Some(hit) = scene.accel.intersect(path.origin, path.dir, f32::INFINITY) else {
+            let Some(hit) = scene.intersect(path.origin, path.dir) else {
                 break;
             };
-            let tri = &scene.tris[hit.prim as usize];
-            let mat = &scene.materials[tri.material as usize];
-            let p = path.origin + path.dir * hit.t;
-            let n = tri.normal;
-            let nf = if path.dir.dot(n) < 0.0 { n } else { -n };
+            let (p, n, nf) = (hit.p, hit.n, hit.nf);
             path.depth += 1;
-            match &mat.kind {
+            match &scene.material(&hit).kind {
                 SurfaceKind::Diffuse { reflectance } => {
                     global.push(grid, p, path.dir, &path.flux);
                     if caustic && path.specular_seen && !path.diffuse_seen {
@@ -249,64 +252,6 @@ pub fn split_dispersive(flux: &[f32], max_split: usize, rng: &mut Rng) -> Vec<Ve
             f
         })
         .collect()
-}
-
-/// Chooses a light and emits a photon from it (flux already divided by the photon count
-/// and the light's selection probability).
-fn emit(scene: &SpectralScene, photons: usize, rng: &mut Rng) -> Option<Path> {
-    if scene.lights.is_empty() {
-        return None;
-    }
-    let li = sample_cdf(&scene.emit_cdf, rng.next_f32());
-    let light = &scene.lights[li];
-    let pmf = scene.emit_pmf[li];
-    if !(pmf > 0.0) {
-        return None;
-    }
-    let norm = 1.0 / (pmf * photons as f32);
-    let (origin, dir, weight) = match light.kind {
-        LightKind::Area { tri } => {
-            let t = &scene.tris[tri as usize];
-            let (b1, b2) = uniform_triangle(rng.next_2d());
-            let p = t.v0 + t.e1 * b1 + t.e2 * b2;
-            let dir = cosine_hemisphere(t.normal, rng.next_2d());
-            (
-                scene.accel.offset(p, t.normal, dir),
-                dir,
-                std::f32::consts::PI * t.area,
-            )
-        }
-        LightKind::Point { position } => (
-            position,
-            uniform_sphere(rng.next_2d()),
-            4.0 * std::f32::consts::PI,
-        ),
-        LightKind::Spot {
-            position,
-            axis,
-            omc_outer,
-            omc_inner,
-        } => {
-            let dir = uniform_cone(axis, omc_outer, rng.next_2d());
-            let solid_angle = 2.0 * std::f32::consts::PI * omc_outer;
-            let omc = one_minus_cos_between(dir, axis);
-            (
-                position,
-                dir,
-                solid_angle * spot_falloff(omc, omc_outer, omc_inner),
-            )
-        }
-    };
-    let mut flux = light.spectrum.clone();
-    spd::scale(&mut flux, weight * norm);
-    Some(Path {
-        origin,
-        dir,
-        flux,
-        depth: 0,
-        diffuse_seen: false,
-        specular_seen: false,
-    })
 }
 
 #[cfg(test)]

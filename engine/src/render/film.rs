@@ -91,18 +91,21 @@ mod tests {
 
     #[test]
     fn many_passes_keep_the_mean_and_the_channel_ratios() {
-        // ice_halo_sim#380: f32 accumulation drifted the hue. 1e8 additions of one value.
+        // ice_halo_sim#380: f32 accumulation drifted the hue. 1e8 passes of one value,
+        // through the film's own `add_pass`.
         let mut f = Film::new(1, 1);
         let v = [0.1f32, 0.3, 0.7];
         for _ in 0..100_000_000u64 {
-            f.sum[0][0] += v[0] as f64;
-            f.sum[0][1] += v[1] as f64;
-            f.sum[0][2] += v[2] as f64;
+            f.add_pass(&[v]);
         }
-        f.passes = 100_000_000;
-        let img = f.develop();
-        for (got, want) in img.pixels[0].iter().zip(v) {
-            assert!(((got - want) / want).abs() < 1e-6, "{:?}", img.pixels[0]);
+        assert_eq!(f.passes(), 100_000_000);
+        let p = f.develop().pixels[0];
+        for (got, want) in p.iter().zip(v) {
+            assert!(((got - want) / want).abs() < 1e-6, "{p:?}");
+        }
+        for (a, b) in [(0, 1), (1, 2), (0, 2)] {
+            let ratio = (p[a] / p[b]) / (v[a] / v[b]);
+            assert!((ratio - 1.0).abs() < 1e-6, "channel ratio {a}/{b}: {p:?}");
         }
     }
 

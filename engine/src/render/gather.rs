@@ -5,13 +5,10 @@
 
 use glam::Vec3;
 
-use crate::lights::spot_falloff;
 use crate::materials::{reflect, russian_roulette, scatter_dielectric};
 use crate::photon::PhotonMap;
-use crate::sampling::{
-    Rng, cosine_hemisphere, one_minus_cos_between, sample_cdf, uniform_triangle,
-};
-use crate::scene::{LightKind, SpectralScene, SurfaceKind};
+use crate::sampling::{Rng, cosine_hemisphere};
+use crate::scene::{SpectralScene, SurfaceKind};
 use crate::spectral::spd;
 
 /// What one pass's gather needs.
@@ -85,15 +82,11 @@ impl Gather<'_> {
         let scene = self.scene;
         s.throughput.fill(1.0);
         for _ in 0..self.max_bounces {
-            let Some(hit) = scene.accel.intersect(origin, dir, f32::INFINITY) else {
+            let Some(hit) = scene.intersect(origin, dir) else {
                 return;
             };
-            let tri = &scene.tris[hit.prim as usize];
-            let mat = &scene.materials[tri.material as usize];
-            let p = origin + dir * hit.t;
-            let n = tri.normal;
-            let front = dir.dot(n) < 0.0;
-            let nf = if front { n } else { -n };
+            let (p, n, nf, front) = (hit.p, hit.n, hit.nf, hit.front);
+            let mat = scene.material(&hit);
             // Emitters seen directly or through specular surfaces.
             if let (Some(e), true) = (&mat.emission, front) {
                 for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(e) {
@@ -135,7 +128,10 @@ impl Gather<'_> {
             return;
         }
         // Direct light by light sampling.
-        self.direct(p, nf, rng, &mut s.tmp);
+        let scene = self.scene;
+        scene
+            .lights
+            .direct(&scene.tris, &scene.accel, p, nf, rng, &mut s.tmp);
         spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
         // Caustics from the caustic map (irradiance, converted to radiance below).
         if let Some(cm) = self.caustic {
@@ -180,15 +176,11 @@ impl Gather<'_> {
         out.fill(0.0);
         t.fill(1.0);
         for _ in 0..self.max_bounces {
-            let Some(hit) = scene.accel.intersect(origin, dir, f32::INFINITY) else {
+            let Some(hit) = scene.intersect(origin, dir) else {
                 return;
             };
-            let tri = &scene.tris[hit.prim as usize];
-            let mat = &scene.materials[tri.material as usize];
-            let p = origin + dir * hit.t;
-            let n = tri.normal;
-            let nf = if dir.dot(n) < 0.0 { n } else { -n };
-            match &mat.kind {
+            let (p, n, nf) = (hit.p, hit.n, hit.nf);
+            match &scene.material(&hit).kind {
                 SurfaceKind::Diffuse { reflectance } => {
                     self.density(self.global, p, nf, self.r_global, out);
                     spd::mul_assign(out, reflectance);
@@ -261,66 +253,6 @@ impl Gather<'_> {
         out.fill(0.0);
         map.gather(&self.scene.grid, p, nf, r, out);
         spd::scale(out, 1.0 / (std::f32::consts::PI * r * r));
-    }
-
-    /// Irradiance from one light sample (N bins), into `out`.
-    fn direct(&self, p: Vec3, nf: Vec3, rng: &mut Rng, out: &mut [f32]) {
-        out.fill(0.0);
-        let scene = self.scene;
-        if scene.lights.is_empty() {
-            return;
-        }
-        let li = sample_cdf(&scene.direct_cdf, rng.next_f32());
-        let pmf = scene.direct_pmf[li];
-        let light = &scene.lights[li];
-        let uv = rng.next_2d();
-        if !(pmf > 0.0) {
-            return;
-        }
-        let (target, weight) = match light.kind {
-            LightKind::Area { tri } => {
-                let t = &scene.tris[tri as usize];
-                let (b1, b2) = uniform_triangle(uv);
-                let y = t.v0 + t.e1 * b1 + t.e2 * b2;
-                let w = y - p;
-                let d2 = w.length_squared();
-                let wn = w / d2.sqrt();
-                let cos_l = -t.normal.dot(wn);
-                if cos_l <= 0.0 {
-                    return;
-                }
-                (y, cos_l * t.area / d2)
-            }
-            LightKind::Point { position } => (position, 1.0 / (position - p).length_squared()),
-            LightKind::Spot {
-                position,
-                axis,
-                omc_outer,
-                omc_inner,
-            } => {
-                let w = p - position;
-                let d2 = w.length_squared();
-                let omc = one_minus_cos_between(w / d2.sqrt(), axis);
-                let f = spot_falloff(omc, omc_outer, omc_inner);
-                if f <= 0.0 {
-                    return;
-                }
-                (position, f / d2)
-            }
-        };
-        let w = target - p;
-        let dist = w.length();
-        let wn = w / dist;
-        let cos_x = nf.dot(wn);
-        if !(cos_x > 0.0 && weight.is_finite() && weight > 0.0) {
-            return;
-        }
-        let origin = scene.accel.offset(p, nf, wn);
-        if scene.accel.occluded(origin, wn, dist * (1.0 - 1e-4)) {
-            return;
-        }
-        out.copy_from_slice(&light.spectrum);
-        spd::scale(out, cos_x * weight / pmf);
     }
 }
 

@@ -13,7 +13,6 @@ use std::f32::consts::PI;
 pub enum Purpose {
     Photon = 1,
     Camera = 2,
-    RadiusEstimate = 3,
 }
 
 /// PCG32 (O'Neill 2014, XSH-RR).

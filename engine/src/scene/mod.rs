@@ -9,8 +9,10 @@
 mod gltf_load;
 mod spectral;
 
+pub use crate::geometry::{SurfaceHit, TriData};
+pub use crate::lights::{Light, LightKind, LightSet};
 pub use gltf_load::{load, load_from_slice, parse_spd_csv};
-pub use spectral::{Light, LightKind, SMaterial, SpectralScene, SurfaceKind, TriData};
+pub use spectral::{SMaterial, SpectralScene, SurfaceKind};
 
 use crate::spectral::{IorModel, Spectrum};
 use glam::Vec3;

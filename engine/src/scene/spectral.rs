@@ -1,12 +1,13 @@
 //! A [`Scene`] projected onto one bin grid: per-bin reflectances, indices and emission,
-//! the BVH, the light list with its sampling distribution, and what the scene needs
+//! the BVH, the lights with their sampling distributions, and what the scene needs
 //! (specular paths? dispersion?). Immutable and shared by every thread of a render.
 
 use glam::Vec3;
 
-use super::{MaterialKind, PunctualKind, Scene};
-use crate::geometry::{Accel, triangle_normal};
-use crate::sampling::{cdf, one_minus_cos};
+use super::{Material, MaterialKind, PunctualKind, PunctualLight, Scene};
+use crate::geometry::{Accel, SurfaceHit, TriData, triangle_normal};
+use crate::lights::{Light, LightKind, LightSet};
+use crate::sampling::one_minus_cos;
 use crate::spectral::{BinGrid, Role, Transport};
 
 /// Surface behaviour with per-bin data.
@@ -32,58 +33,13 @@ pub struct SMaterial {
     pub emission: Option<Vec<f32>>,
 }
 
-/// A triangle with what shading needs precomputed.
-#[derive(Clone, Copy, Debug)]
-pub struct TriData {
-    pub v0: Vec3,
-    pub e1: Vec3,
-    pub e2: Vec3,
-    /// Unit geometric normal (front face: counter-clockwise winding).
-    pub normal: Vec3,
-    pub area: f32,
-    pub material: u32,
-}
-
-#[derive(Clone, Debug)]
-pub enum LightKind {
-    /// An emissive triangle (one-sided, Lambertian).
-    Area {
-        tri: u32,
-    },
-    Point {
-        position: Vec3,
-    },
-    Spot {
-        position: Vec3,
-        axis: Vec3,
-        /// 1 − cos of the outer and inner cone angles (precise for narrow cones).
-        omc_outer: f32,
-        omc_inner: f32,
-    },
-}
-
-#[derive(Clone, Debug)]
-pub struct Light {
-    pub kind: LightKind,
-    /// Per-bin emitted radiance (area) or intensity (punctual).
-    pub spectrum: Vec<f32>,
-    /// Emitted power as luminance (Y), for choosing lights.
-    pub power: f32,
-}
-
 pub struct SpectralScene {
     pub name: String,
     pub grid: BinGrid,
     pub accel: Accel,
     pub tris: Vec<TriData>,
     pub materials: Vec<SMaterial>,
-    pub lights: Vec<Light>,
-    /// Photon emission: light i chosen with probability `emit_pmf[i]`.
-    pub emit_pmf: Vec<f32>,
-    pub emit_cdf: Vec<f32>,
-    /// Direct lighting: light i sampled with probability proportional to its power.
-    pub direct_pmf: Vec<f32>,
-    pub direct_cdf: Vec<f32>,
+    pub lights: LightSet,
     pub camera: super::Camera,
     pub bounds: (Vec3, Vec3),
     /// Total area of diffuse triangles (for the default gather radius).
@@ -97,152 +53,19 @@ pub struct SpectralScene {
 
 impl SpectralScene {
     pub fn new(scene: &Scene, grid: BinGrid) -> Self {
-        let n = grid.len();
         let mut warnings = scene.warnings.clone();
         let materials: Vec<SMaterial> = scene
             .materials
             .iter()
-            .map(|m| {
-                // Reflectances above 1 (Smits' basis reaches 1.0007) would add energy.
-                let refl = |s| -> Vec<f32> {
-                    grid.project(s, Role::Reflectance)
-                        .into_iter()
-                        .map(|v| v.min(1.0))
-                        .collect()
-                };
-                let kind = match &m.kind {
-                    MaterialKind::Diffuse { reflectance } => SurfaceKind::Diffuse {
-                        reflectance: refl(reflectance),
-                    },
-                    MaterialKind::Mirror { reflectance } => SurfaceKind::Mirror {
-                        reflectance: refl(reflectance),
-                    },
-                    MaterialKind::Dielectric { ior } => {
-                        let eta: Vec<f32> = (0..n)
-                            .map(|i| ior.eta(grid.ior_wavelength(i)) as f32)
-                            .collect();
-                        let dispersive = grid.transport() == Transport::Spectral
-                            && n > 1
-                            && ior.is_dispersive()
-                            && eta.iter().any(|&e| e != eta[0]);
-                        SurfaceKind::Dielectric { eta, dispersive }
-                    }
-                };
-                SMaterial {
-                    name: m.name.clone(),
-                    kind,
-                    emission: m.emission.as_ref().map(|e| grid.project(e, Role::Emission)),
-                }
-            })
+            .map(|m| project_material(m, &grid))
             .collect();
-
-        let mut tris = Vec::with_capacity(scene.triangles.len());
-        let mut lights = Vec::new();
-        let mut diffuse_area = 0.0f64;
-        for (i, (t, &m)) in scene
-            .triangles
-            .iter()
-            .zip(&scene.triangle_material)
-            .enumerate()
-        {
-            let (twice_area, normal) = triangle_normal(t);
-            let area = 0.5 * twice_area;
-            tris.push(TriData {
-                v0: t[0],
-                e1: t[1] - t[0],
-                e2: t[2] - t[0],
-                normal,
-                area,
-                material: m,
-            });
-            let mat = &materials[m as usize];
-            if matches!(mat.kind, SurfaceKind::Diffuse { .. }) {
-                diffuse_area += area as f64;
-            }
-            if let Some(e) = &mat.emission {
-                let y = luminance_of(&grid, e);
-                if area > 0.0 && y > 0.0 {
-                    lights.push(Light {
-                        kind: LightKind::Area { tri: i as u32 },
-                        spectrum: e.clone(),
-                        power: (y * std::f64::consts::PI * area as f64) as f32,
-                    });
-                }
-            }
-        }
+        let (tris, mut lights, diffuse_area) = triangles_and_area_lights(scene, &materials, &grid);
         for l in &scene.lights {
-            let spectrum = grid.project(&l.intensity, Role::Emission);
-            let y = luminance_of(&grid, &spectrum);
-            let (kind, solid_angle) = match l.kind {
-                PunctualKind::Point => (
-                    LightKind::Point {
-                        position: l.position,
-                    },
-                    4.0 * std::f64::consts::PI,
-                ),
-                PunctualKind::Spot {
-                    direction,
-                    inner,
-                    outer,
-                } => (
-                    LightKind::Spot {
-                        position: l.position,
-                        axis: direction,
-                        omc_outer: one_minus_cos(outer),
-                        omc_inner: one_minus_cos(inner.min(outer)),
-                    },
-                    2.0 * std::f64::consts::PI * one_minus_cos(outer) as f64,
-                ),
-            };
-            if y > 0.0 {
-                lights.push(Light {
-                    kind,
-                    spectrum,
-                    power: (y * solid_angle) as f32,
-                });
-            } else {
-                warnings.push(format!("light '{}' is black and is skipped", l.name));
+            match punctual_light(l, &grid) {
+                Some(light) => lights.push(light),
+                None => warnings.push(format!("light '{}' is black and is skipped", l.name)),
             }
         }
-        // Photons: half of them by power, half evenly over light *groups* (all area
-        // triangles of one material count as one group), so a small bright spot next to a
-        // large dim panel still gets enough photons for its caustic.
-        let total: f64 = lights.iter().map(|l| l.power as f64).sum();
-        let group_of = |l: &Light| -> usize {
-            match l.kind {
-                LightKind::Area { tri } => tris[tri as usize].material as usize,
-                _ => usize::MAX,
-            }
-        };
-        let mut groups: Vec<(usize, f64)> = Vec::new(); // (group id, power) — punctual lights are their own group
-        let mut light_group = Vec::with_capacity(lights.len());
-        for (i, l) in lights.iter().enumerate() {
-            let g = group_of(l);
-            let key = if g == usize::MAX { usize::MAX - i } else { g };
-            let idx = match groups.iter().position(|(k, _)| *k == key) {
-                Some(p) => p,
-                None => {
-                    groups.push((key, 0.0));
-                    groups.len() - 1
-                }
-            };
-            groups[idx].1 += l.power as f64;
-            light_group.push(idx);
-        }
-        let emit_pmf: Vec<f32> = lights
-            .iter()
-            .zip(&light_group)
-            .map(|(l, &g)| {
-                let by_power = l.power as f64 / total;
-                let group_share = 1.0 / groups.len() as f64;
-                let in_group = l.power as f64 / groups[g].1;
-                (0.5 * by_power + 0.5 * group_share * in_group) as f32
-            })
-            .collect();
-        let direct_pmf: Vec<f32> = lights
-            .iter()
-            .map(|l| (l.power as f64 / total) as f32)
-            .collect();
         let has_specular = materials
             .iter()
             .any(|m| !matches!(m.kind, SurfaceKind::Diffuse { .. }));
@@ -258,14 +81,10 @@ impl SpectralScene {
         Self {
             name: scene.name.clone(),
             accel: Accel::new(&scene.triangles),
-            emit_cdf: cdf(&emit_pmf),
-            direct_cdf: cdf(&direct_pmf),
-            emit_pmf,
-            direct_pmf,
+            lights: LightSet::new(lights, &tris),
             grid,
             tris,
             materials,
-            lights,
             camera: scene.camera,
             bounds: scene.bounds(),
             diffuse_area,
@@ -279,15 +98,133 @@ impl SpectralScene {
         self.grid.len()
     }
 
-    pub fn material_of(&self, prim: u32) -> &SMaterial {
-        &self.materials[self.tris[prim as usize].material as usize]
-    }
-
     pub fn diagonal(&self) -> f32 {
         (self.bounds.1 - self.bounds.0).length()
     }
+
+    /// The closest surface along a ray, with its normals and material.
+    #[inline]
+    pub fn intersect(&self, origin: Vec3, dir: Vec3) -> Option<SurfaceHit> {
+        let hit = self.accel.intersect(origin, dir, f32::INFINITY)?;
+        Some(SurfaceHit::new(
+            &self.tris[hit.prim as usize],
+            origin,
+            dir,
+            hit.t,
+        ))
+    }
+
+    pub fn material(&self, hit: &SurfaceHit) -> &SMaterial {
+        &self.materials[hit.material as usize]
+    }
 }
 
-fn luminance_of(grid: &BinGrid, v: &[f32]) -> f64 {
-    grid.to_xyz(v)[1]
+/// A material's per-bin data on `grid`.
+fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
+    // Reflectances above 1 (Smits' basis reaches 1.0007) would add energy.
+    let refl = |s| -> Vec<f32> {
+        grid.project(s, Role::Reflectance)
+            .into_iter()
+            .map(|v| v.min(1.0))
+            .collect()
+    };
+    let kind = match &m.kind {
+        MaterialKind::Diffuse { reflectance } => SurfaceKind::Diffuse {
+            reflectance: refl(reflectance),
+        },
+        MaterialKind::Mirror { reflectance } => SurfaceKind::Mirror {
+            reflectance: refl(reflectance),
+        },
+        MaterialKind::Dielectric { ior } => {
+            let eta: Vec<f32> = (0..grid.len())
+                .map(|i| ior.eta(grid.ior_wavelength(i)) as f32)
+                .collect();
+            let dispersive = grid.transport() == Transport::Spectral
+                && grid.len() > 1
+                && ior.is_dispersive()
+                && eta.iter().any(|&e| e != eta[0]);
+            SurfaceKind::Dielectric { eta, dispersive }
+        }
+    };
+    SMaterial {
+        name: m.name.clone(),
+        kind,
+        emission: m.emission.as_ref().map(|e| grid.project(e, Role::Emission)),
+    }
+}
+
+/// The triangles with their precomputed data, an area light per emissive triangle of
+/// positive area, and the total diffuse area.
+fn triangles_and_area_lights(
+    scene: &Scene,
+    materials: &[SMaterial],
+    grid: &BinGrid,
+) -> (Vec<TriData>, Vec<Light>, f64) {
+    let mut tris = Vec::with_capacity(scene.triangles.len());
+    let mut lights = Vec::new();
+    let mut diffuse_area = 0.0f64;
+    for (i, (t, &m)) in scene
+        .triangles
+        .iter()
+        .zip(&scene.triangle_material)
+        .enumerate()
+    {
+        let (twice_area, normal) = triangle_normal(t);
+        let area = 0.5 * twice_area;
+        tris.push(TriData {
+            v0: t[0],
+            e1: t[1] - t[0],
+            e2: t[2] - t[0],
+            normal,
+            area,
+            material: m,
+        });
+        let mat = &materials[m as usize];
+        if matches!(mat.kind, SurfaceKind::Diffuse { .. }) {
+            diffuse_area += area as f64;
+        }
+        if let Some(e) = &mat.emission {
+            let y = grid.to_xyz(e)[1];
+            if area > 0.0 && y > 0.0 {
+                lights.push(Light {
+                    kind: LightKind::Area { tri: i as u32 },
+                    spectrum: e.clone(),
+                    power: (y * std::f64::consts::PI * area as f64) as f32,
+                });
+            }
+        }
+    }
+    (tris, lights, diffuse_area)
+}
+
+/// A point or spot light on `grid`; None when it is black.
+fn punctual_light(l: &PunctualLight, grid: &BinGrid) -> Option<Light> {
+    let spectrum = grid.project(&l.intensity, Role::Emission);
+    let y = grid.to_xyz(&spectrum)[1];
+    let (kind, solid_angle) = match l.kind {
+        PunctualKind::Point => (
+            LightKind::Point {
+                position: l.position,
+            },
+            4.0 * std::f64::consts::PI,
+        ),
+        PunctualKind::Spot {
+            direction,
+            inner,
+            outer,
+        } => (
+            LightKind::Spot {
+                position: l.position,
+                axis: direction,
+                omc_outer: one_minus_cos(outer),
+                omc_inner: one_minus_cos(inner.min(outer)),
+            },
+            2.0 * std::f64::consts::PI * one_minus_cos(outer) as f64,
+        ),
+    };
+    (y > 0.0).then_some(Light {
+        kind,
+        spectrum,
+        power: (y * solid_angle) as f32,
+    })
 }

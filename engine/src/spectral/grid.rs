@@ -12,6 +12,10 @@ use super::smits::SmitsBins;
 use super::spectrum::{Role, Spectrum};
 use super::tables::{CMF_RANGE, cmf};
 
+/// The bin counts of the paper's tables (Lai & Christensen, Tables 1 and 2): the viewer's
+/// presets and the report's sweep.
+pub const PAPER_BINS: [usize; 7] = [4, 5, 6, 8, 10, 20, 100];
+
 /// The most bins a grid may have. Spike records store the bin index in an f32, exact up to
 /// 2²⁴; the limit is far lower so that an absurd request is refused, not swapped.
 pub const MAX_BINS: usize = 4096;
@@ -124,10 +128,6 @@ impl BinGrid {
 
     pub fn is_empty(&self) -> bool {
         self.to_srgb.is_empty()
-    }
-
-    pub fn range(&self) -> (f64, f64) {
-        (self.lambda_min, self.lambda_max)
     }
 
     /// Bin centres in nm (nominal primaries' wavelengths for RGB).
@@ -272,10 +272,6 @@ pub mod spd {
 
     pub fn sum(a: &[f32]) -> f32 {
         a.iter().sum()
-    }
-
-    pub fn dot(a: &[f32], b: &[f32]) -> f32 {
-        a.iter().zip(b).map(|(x, y)| x * y).sum()
     }
 
     pub fn max(a: &[f32]) -> f32 {

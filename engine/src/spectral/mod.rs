@@ -9,7 +9,7 @@ pub mod smits;
 pub mod spectrum;
 pub mod tables;
 
-pub use grid::{BinGrid, GridError, MAX_BINS, Transport, spd};
+pub use grid::{BinGrid, GridError, MAX_BINS, PAPER_BINS, Transport, spd};
 pub use ior::IorModel;
 pub use spectrum::{Role, Spectrum};
 
