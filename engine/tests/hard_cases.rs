@@ -153,7 +153,7 @@ fn photons_far_outside_the_scene_and_empty_maps_are_harmless() {
         Vec3::splat(-1e30),
         Vec3::new(1e-30, 0.0, 0.0),
     ] {
-        b.push(&grid, p, -Vec3::Z, &[1.0, 0.0, 0.0, 0.0]);
+        b.push(&grid, p, Vec3::Z, &[1.0, 0.0, 0.0, 0.0]);
     }
     let map = PhotonMap::build(b);
     let mut out = vec![0.0; 4];
@@ -360,6 +360,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
         }],
         lights: vec![],
         camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0),
+        environment: None,
         warnings: vec![],
     };
     // A black (clamped negative) emitter gives no light: rendering is finite and black.

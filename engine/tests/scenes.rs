@@ -173,9 +173,17 @@ fn broken_files_get_errors_naming_file_element_and_value() {
         1,
     ));
     assert!(e.contains("EXT_unknown"), "{e}");
-    // No light at all.
-    let e = error_of(&text.replace("\"emissiveFactor\"", "\"_emissiveFactor\""));
-    assert!(e.contains("no light"), "{e}");
+    // No light at all: lit by the default sky, and told so.
+    let dark = text.replace("\"emissiveFactor\"", "\"_emissiveFactor\"");
+    let s = scene::load_from_slice(dark.as_bytes(), "test.gltf", None).unwrap();
+    assert!(s.environment.is_some());
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("no light") && w.contains("sky")),
+        "{:?}",
+        s.warnings
+    );
     // A bad blackbody temperature.
     let bb = std::fs::read_to_string(root().join("scenes/cornell-blackbody.gltf")).unwrap();
     let e = error_of(&bb.replace("\"blackbody_k\": 3000", "\"blackbody_k\": -5"));
@@ -183,6 +191,67 @@ fn broken_files_get_errors_naming_file_element_and_value() {
     // A misspelt extras field is refused, not ignored.
     let e = error_of(&bb.replace("\"blackbody_k\"", "\"blackbody_kelvin\""));
     assert!(e.contains("blackbody_kelvin"), "{e}");
+}
+
+#[test]
+fn files_from_other_tools_get_errors_that_say_what_to_do() {
+    let dir = std::env::temp_dir().join(format!("prismap-scenes-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // A .gltf whose .bin is missing names the buffer file and where it was looked for.
+    let gltf = r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"buffers":[{"byteLength":36,"uri":"scene.bin"}]}"#;
+    std::fs::write(dir.join("scene.gltf"), gltf).unwrap();
+    let e = scene::load(&dir.join("scene.gltf"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("buffers[0]") && e.contains("scene.bin") && e.contains("missing"),
+        "{e}"
+    );
+    // An OBJ file is called one, with what to export instead.
+    std::fs::write(
+        dir.join("model.obj"),
+        "# Blender\nmtllib model.mtl\no Cube\nv 1 1 1\nv 1 -1 1\n",
+    )
+    .unwrap();
+    let e = scene::load(&dir.join("model.obj")).unwrap_err().to_string();
+    assert!(
+        e.contains("model.obj") && e.contains("OBJ") && e.contains("glTF"),
+        "{e}"
+    );
+    // A missing file is named once (the OS error is not repeated as a source).
+    let e = scene::load(&dir.join("nothing.gltf")).unwrap_err();
+    assert!(std::error::Error::source(&e).is_none(), "{e}");
+    // A misspelt built-in name suggests the right one.
+    let e = scene::load_any("cornell").unwrap_err().to_string();
+    assert!(
+        e.contains("cornell-box") && e.contains("did you mean"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+    let text = cornell_text();
+    // Draco-compressed meshes: valid, but not readable here, and how to re-export.
+    let e = error_of(&text.replacen(
+        "\"extensionsUsed\"",
+        "\"extensionsRequired\": [\"KHR_draco_mesh_compression\"], \"extensionsUsed\"",
+        1,
+    ));
+    assert!(
+        e.contains("valid glTF")
+            && e.contains("KHR_draco_mesh_compression")
+            && e.contains("Compression"),
+        "{e}"
+    );
+    // An index of refraction glTF does not allow.
+    let glass = text.replacen(
+        "\"name\": \"white\",",
+        "\"name\": \"white\", \"extensions\": {\"KHR_materials_ior\": {\"ior\": -1.5}},",
+        1,
+    );
+    let e = error_of(&glass);
+    assert!(
+        e.contains("materials[0]") && e.contains("ior") && e.contains("-1.5"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -72,6 +72,9 @@ pub struct ViewerApp {
     pub auto_bins: bool,
     auto_reason: String,
     pub exposure: f32,
+    /// Exposure follows each new image ([`crate::output::auto_exposure`]) until the user
+    /// sets one.
+    pub auto_exposure: bool,
     pub tone: ToneMap,
     pub paused: bool,
     texture: Option<egui::TextureHandle>,
@@ -130,6 +133,7 @@ impl ViewerApp {
             auto_bins: false,
             auto_reason: String::new(),
             exposure: 1.0,
+            auto_exposure: true,
             tone: ToneMap::Clamp,
             paused: false,
             texture: None,
@@ -340,6 +344,9 @@ impl ViewerApp {
                     self.memory_history.pop_front();
                 }
                 self.shown = Some(key);
+                if self.auto_exposure {
+                    self.exposure = crate::output::auto_exposure(&s.image);
+                }
                 self.snapshot = Some(s);
                 self.upload(ctx);
             }

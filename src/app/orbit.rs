@@ -49,7 +49,10 @@ impl Orbit {
         let pivot = self.pivot + self.pan;
         let position = pivot + q * offset * self.zoom;
         let up = q * self.base.up;
-        Camera::look_at(position, pivot, up, self.base.yfov)
+        Camera {
+            aspect: self.base.aspect,
+            ..Camera::look_at(position, pivot, up, self.base.yfov)
+        }
     }
 
     /// Drag by (dx, dy) pixels.

@@ -127,11 +127,18 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         });
                 }
                 ui.separator();
-                ui.add(
-                    egui::Slider::new(&mut app.exposure, 0.05..=50.0)
-                        .logarithmic(true)
-                        .text("Exposure"),
-                );
+                ui.horizontal(|ui| {
+                    let r = ui.add(
+                        egui::Slider::new(&mut app.exposure, 1e-5..=1e3)
+                            .logarithmic(true)
+                            .text("Exposure"),
+                    );
+                    if r.changed() {
+                        app.auto_exposure = false;
+                    }
+                    ui.checkbox(&mut app.auto_exposure, "auto-expose")
+                        .on_hover_text("Expose each new image so middle grey and the highlights both show (photometric scenes can be thousands of nits)");
+                });
                 ui.horizontal(|ui| {
                     ui.radio_value(&mut app.tone, ToneMap::Clamp, "clamp");
                     ui.radio_value(&mut app.tone, ToneMap::Reinhard, "Reinhard");

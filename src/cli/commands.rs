@@ -25,9 +25,13 @@ pub fn render(args: RenderArgs) -> Result<()> {
             check_writable(p, &[ext])?;
         }
     }
-    let exposure = validate_exposure(args.exposure)?;
+    let exposure = args.exposure.map(validate_exposure).transpose()?;
     let stop = Stop::from_flags(args.passes, args.seconds)?;
-    let settings = args.settings()?;
+    let mut settings = args.settings()?;
+    if args.size.is_none() {
+        // The camera's shape (a 16:9 Blender camera renders 16:9).
+        (settings.width, settings.height) = scene.image_size(settings.height);
+    }
     let reference = match &args.reference {
         Some(r) => Some(output::read_exr(r)?),
         None => None,
@@ -41,9 +45,12 @@ pub fn render(args: RenderArgs) -> Result<()> {
         .context("cannot start the worker threads")?;
     let mut session = pool.install(|| RenderSession::new(&scene, settings))?;
     let bar = progress_bar(stop);
-    let reference = reference
-        .as_ref()
-        .map(|image| ErrorReference { image, exposure });
+    // The error log compares display values at the given exposure (1 when automatic:
+    // the reference and the render are the same scene).
+    let reference = reference.as_ref().map(|image| ErrorReference {
+        image,
+        exposure: exposure.unwrap_or(1.0),
+    });
     let log = pool
         .install(|| {
             session.run(stop, reference, &mut |s, _| {
@@ -55,6 +62,13 @@ pub fn render(args: RenderArgs) -> Result<()> {
         .with_context(|| format!("{}: render failed", scene.name))?;
     bar.finish_and_clear();
     let image = session.image();
+    let exposure = exposure.unwrap_or_else(|| output::auto_exposure(&image));
+    let is_png = output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    if is_png && let Some(w) = output::clipping_warning(&image, exposure) {
+        eprintln!("warning: {w}");
+    }
     output::write_image(&output, &image, exposure)?;
     let stats = Stats::of(&session, &image, start.elapsed().as_secs_f64());
     if let Some(path) = &args.stats {

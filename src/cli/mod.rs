@@ -61,7 +61,7 @@ pub struct RenderArgs {
     /// --passes, whichever comes first).
     #[arg(long, allow_negative_numbers = true)]
     pub seconds: Option<f64>,
-    /// Image size WxH.
+    /// Image size WxH (default: 256 rows, as wide as the scene's camera asks).
     #[arg(long, value_parser = parse_size, allow_hyphen_values = true)]
     pub size: Option<(u32, u32)>,
     #[arg(long)]
@@ -91,9 +91,10 @@ pub struct RenderArgs {
     /// photons per pass are lowered to fit.
     #[arg(long, allow_negative_numbers = true)]
     pub photon_budget: Option<f64>,
-    /// Exposure multiplier for the PNG (EXR is written linear, unscaled).
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
-    pub exposure: f32,
+    /// Exposure multiplier for the PNG (default: automatic, from the image; EXR is always
+    /// written linear, unscaled).
+    #[arg(long, allow_negative_numbers = true)]
+    pub exposure: Option<f32>,
     /// Output image: .png (sRGB) or .exr (linear sRGB). Default: SCENE.png.
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,

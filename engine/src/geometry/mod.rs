@@ -11,6 +11,14 @@ pub struct Hit {
     pub prim: u32,
 }
 
+/// `dir` with every −0.0 component made +0.0: obvhs' traversal misses everything along a
+/// ray with a negative-zero component (a sun shining straight down along (−0, −1, −0)
+/// lit nothing).
+#[inline]
+fn positive_zeros(dir: Vec3) -> Vec3 {
+    dir + Vec3::ZERO
+}
+
 /// A triangle with what shading needs precomputed.
 #[derive(Clone, Copy, Debug)]
 pub struct TriData {
@@ -121,6 +129,7 @@ impl Accel {
         if self.tris.is_empty() {
             return None;
         }
+        let dir = positive_zeros(dir);
         let ray = obvhs::ray::Ray::new(Vec3A::from(origin), Vec3A::from(dir), 0.0, t_max);
         let mut hit = RayHit::none();
         if self
@@ -142,6 +151,7 @@ impl Accel {
         if self.tris.is_empty() {
             return false;
         }
+        let dir = positive_zeros(dir);
         let ray = obvhs::ray::Ray::new(Vec3A::from(origin), Vec3A::from(dir), 0.0, t_max);
         !self
             .bvh
@@ -183,6 +193,36 @@ pub fn triangle_normal(t: &[Vec3; 3]) -> (f32, Vec3) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn axis_aligned_rays_with_negative_zero_components_hit() {
+        let floor = [
+            [
+                Vec3::new(-2.0, 0.0, -2.0),
+                Vec3::new(-2.0, 0.0, 2.0),
+                Vec3::new(2.0, 0.0, 2.0),
+            ],
+            [
+                Vec3::new(-2.0, 0.0, -2.0),
+                Vec3::new(2.0, 0.0, 2.0),
+                Vec3::new(2.0, 0.0, -2.0),
+            ],
+        ];
+        let accel = Accel::new(&floor);
+        let o = Vec3::new(0.1, 2.85, 0.2);
+        for d in [
+            -Vec3::Y,
+            Vec3::new(0.0, -1.0, 0.0),
+            Vec3::new(-0.0, -1.0, 0.0),
+        ] {
+            let hit = accel.intersect(o, d, f32::INFINITY);
+            assert!(
+                hit.is_some_and(|h| (h.t - 2.85).abs() < 1e-5),
+                "{d:?}: {hit:?}"
+            );
+            assert!(accel.occluded(o, d, f32::INFINITY), "{d:?}");
+        }
+    }
 
     fn quad(z: f32, size: f32, offset: Vec3) -> Vec<[Vec3; 3]> {
         let a = Vec3::new(-size, -size, z) + offset;

@@ -28,6 +28,20 @@ pub enum LightKind {
         omc_outer: f32,
         omc_inner: f32,
     },
+    /// Parallel light travelling along `dir` (glTF directional, Blender's Sun); the
+    /// spectrum is the irradiance on a surface facing it. Photons start on a disc that
+    /// covers the scene's bounding sphere (`center`, `radius`).
+    Distant {
+        dir: Vec3,
+        center: Vec3,
+        radius: f32,
+    },
+    /// A uniform sky of the spectrum's radiance all around the scene's bounding sphere;
+    /// photons enter the sphere from every direction.
+    Environment {
+        center: Vec3,
+        radius: f32,
+    },
 }
 
 #[derive(Clone, Debug)]
@@ -128,6 +142,7 @@ impl LightSet {
         photons: usize,
         rng: &mut Rng,
     ) -> Option<Emitted> {
+        use std::f32::consts::PI;
         if self.lights.is_empty() {
             return None;
         }
@@ -161,6 +176,22 @@ impl LightSet {
                 let falloff = spot_falloff(one_minus_cos_between(dir, axis), omc_outer, omc_inner);
                 (position, dir, solid_angle * falloff)
             }
+            LightKind::Distant {
+                dir,
+                center,
+                radius,
+            } => {
+                // A disc of the bounding sphere's radius, one radius behind its centre.
+                let origin = center - dir * radius + disc_point(dir, radius, rng.next_2d());
+                (origin, dir, PI * radius * radius)
+            }
+            LightKind::Environment { center, radius } => {
+                // Direction uniform on the sphere, start point uniform on the disc across
+                // the bounding sphere facing it: flux L · 4π · πR².
+                let dir = uniform_sphere(rng.next_2d());
+                let origin = center - dir * radius + disc_point(dir, radius, rng.next_2d());
+                (origin, dir, 4.0 * PI * PI * radius * radius)
+            }
         };
         let mut flux = light.spectrum.clone();
         spd::scale(&mut flux, weight / (pmf * photons as f32));
@@ -188,12 +219,23 @@ impl LightSet {
         if !(pmf > 0.0) {
             return;
         }
-        let Some((target, weight)) = sample_towards(light, tris, p, uv) else {
-            return;
+        let (wn, dist, weight) = match &light.kind {
+            LightKind::Distant { dir, .. } => (-*dir, f32::INFINITY, 1.0),
+            LightKind::Environment { .. } => {
+                // Cosine-weighted: radiance · cos / (cos/π) = π · radiance per sample.
+                let wn = cosine_hemisphere(nf, uv);
+                let cos = nf.dot(wn).max(1e-6);
+                (wn, f32::INFINITY, std::f32::consts::PI / cos)
+            }
+            _ => {
+                let Some((target, weight)) = sample_towards(light, tris, p, uv) else {
+                    return;
+                };
+                let w = target - p;
+                let dist = w.length();
+                (w / dist, dist, weight)
+            }
         };
-        let w = target - p;
-        let dist = w.length();
-        let wn = w / dist;
         let cos_x = nf.dot(wn);
         if !(cos_x > 0.0 && weight.is_finite() && weight > 0.0) {
             return;
@@ -212,6 +254,7 @@ impl LightSet {
 /// towards `p`.
 fn sample_towards(light: &Light, tris: &[TriData], p: Vec3, uv: [f32; 2]) -> Option<(Vec3, f32)> {
     match light.kind {
+        LightKind::Distant { .. } | LightKind::Environment { .. } => None,
         LightKind::Area { tri } => {
             let t = &tris[tri as usize];
             let (b1, b2) = uniform_triangle(uv);
@@ -238,6 +281,14 @@ fn sample_towards(light: &Light, tris: &[TriData], p: Vec3, uv: [f32; 2]) -> Opt
             (f > 0.0).then_some((position, f / d2))
         }
     }
+}
+
+/// A uniform point on the disc of `radius` perpendicular to unit `axis`, about the origin.
+fn disc_point(axis: Vec3, radius: f32, u: [f32; 2]) -> Vec3 {
+    let (t, b) = crate::sampling::basis(axis);
+    let r = radius * u[0].sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u[1];
+    t * (r * phi.cos()) + b * (r * phi.sin())
 }
 
 /// glTF's spot falloff: smooth (squared linear ramp) between the cone angles, a hard

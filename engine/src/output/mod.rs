@@ -71,6 +71,64 @@ impl ToneMap {
     }
 }
 
+/// An exposure that shows `image` well: the log-average luminance maps to 0.18 (middle
+/// grey, Reinhard's key), but never so bright that the brightest 1 % of pixels clip.
+/// 1 for a black image. Applies to display (PNG, the viewer); EXR stays linear.
+pub fn auto_exposure(image: &Image) -> f32 {
+    let mut y: Vec<f32> = image
+        .pixels
+        .iter()
+        .map(|p| luminance_of(*p))
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    if y.is_empty() {
+        return 1.0;
+    }
+    // Pixels at or near black count at a floor, so a mostly dark stage keeps its key.
+    let floor = 1e-4 * y.iter().cloned().fold(0.0f32, f32::max);
+    let n = image.pixels.len() as f64;
+    let log_sum: f64 = y.iter().map(|v| (v.max(floor) as f64).ln()).sum::<f64>()
+        + (n - y.len() as f64) * (floor as f64).ln();
+    let log_avg = (log_sum / n).exp() as f32;
+    let k = ((y.len() - 1) as f64 * 0.99) as usize;
+    let (_, p99, _) = y.select_nth_unstable_by(k, f32::total_cmp);
+    let by_key = 0.18 / log_avg;
+    let by_highlights = 0.95 / *p99;
+    let e = by_key.min(by_highlights);
+    if e.is_finite() && e > 0.0 { e } else { 1.0 }
+}
+
+/// The fraction of pixels with a channel above 1 after `exposure` (clipped on display).
+pub fn clipped_fraction(image: &Image, exposure: f32) -> f64 {
+    if image.pixels.is_empty() {
+        return 0.0;
+    }
+    let clipped = image
+        .pixels
+        .iter()
+        .filter(|p| p.iter().any(|v| v * exposure > 1.0))
+        .count();
+    clipped as f64 / image.pixels.len() as f64
+}
+
+/// A warning when more than `CLIP_WARNING` of the pixels clip at `exposure`.
+pub fn clipping_warning(image: &Image, exposure: f32) -> Option<String> {
+    let f = clipped_fraction(image, exposure);
+    (f > CLIP_WARNING).then(|| {
+        format!(
+            "{:.1} % of the pixels clip at exposure {exposure:.3e}: lower --exposure (or leave it out for automatic exposure), or write EXR for the linear values",
+            100.0 * f
+        )
+    })
+}
+
+/// Clipped pixels above this fraction get a warning.
+pub const CLIP_WARNING: f64 = 0.03;
+
+fn luminance_of(p: [f32; 3]) -> f32 {
+    0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]
+}
+
 /// 8-bit sRGB pixels, RGB interleaved (exposure and tone map applied).
 pub fn to_display8(image: &Image, exposure: f32, tone: ToneMap) -> Vec<u8> {
     image
@@ -180,6 +238,41 @@ mod tests {
             height: 2,
             pixels: vec![[v, v * 0.5, v * 0.25]; 8],
         }
+    }
+
+    #[test]
+    fn auto_exposure_keys_the_scene_and_keeps_highlights() {
+        // A uniform image of luminance 2 is keyed to 0.18.
+        let flat = Image {
+            width: 4,
+            height: 4,
+            pixels: vec![[2.0; 3]; 16],
+        };
+        assert!((auto_exposure(&flat) - 0.09).abs() < 1e-4);
+        // Photometric scale: the same picture 54 351× brighter gets 1/54 351 of the exposure.
+        let mut scene: Vec<[f32; 3]> = (0..400).map(|i| [0.01 + i as f32 * 1e-3; 3]).collect();
+        scene[7] = [5.0; 3];
+        let a = Image {
+            width: 20,
+            height: 20,
+            pixels: scene.clone(),
+        };
+        let b = Image {
+            width: 20,
+            height: 20,
+            pixels: scene.iter().map(|p| p.map(|v| v * 54_351.0)).collect(),
+        };
+        let (ea, eb) = (auto_exposure(&a), auto_exposure(&b));
+        assert!(((ea / eb) / 54_351.0 - 1.0).abs() < 1e-3, "{ea} {eb}");
+        // No more than 1 % of the pixels clip at the automatic exposure.
+        assert!(clipped_fraction(&b, eb) <= 0.01 + 1e-9);
+        assert!(clipping_warning(&b, 1.0).is_some() && clipping_warning(&b, eb).is_none());
+        let black = Image {
+            width: 2,
+            height: 2,
+            pixels: vec![[0.0; 3]; 4],
+        };
+        assert_eq!(auto_exposure(&black), 1.0);
     }
 
     #[test]

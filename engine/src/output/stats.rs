@@ -46,6 +46,7 @@ pub struct MemoryStats {
     pub global_map: usize,
     pub caustic_map: usize,
     pub photon_maps: usize,
+    pub irradiance_cache: usize,
     pub film: usize,
     pub bvh: usize,
 }
@@ -93,6 +94,7 @@ impl Stats {
                 global_map: mem.global_map,
                 caustic_map: mem.caustic_map,
                 photon_maps: mem.photon_maps,
+                irradiance_cache: mem.irradiance_cache,
                 film: mem.film,
                 bvh: mem.bvh,
             },

@@ -101,6 +101,105 @@ pub fn for_each_within(
     }
 }
 
+/// The `k` nearest positions within distance √`r2_max` of `p` that pass `accept`, as
+/// (distance², index) pairs in `found` (unordered; cleared first). Returns the squared
+/// search radius at the end: the k-th nearest's distance² when k were found, else
+/// `r2_max`. One traversal with a bounded max-heap, so the work grows with k and log n,
+/// not with how many photons lie inside `r2_max`.
+pub fn k_nearest_within(
+    positions: &[[f32; 3]],
+    axes: &[u8],
+    p: Vec3,
+    k: usize,
+    r2_max: f32,
+    accept: impl Fn(usize) -> bool,
+    found: &mut Vec<(f32, u32)>,
+) -> f32 {
+    found.clear();
+    if k == 0 {
+        return r2_max;
+    }
+    let p = p.to_array();
+    let mut r2 = r2_max;
+    let mut stack = [(0usize, 0usize, 0f32); 64];
+    let mut sp = 0;
+    let (mut lo, mut hi) = (0usize, positions.len());
+    loop {
+        if lo < hi {
+            let mid = (lo + hi) / 2;
+            let q = positions[mid];
+            let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+            let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            if dist2 < r2 && accept(mid) {
+                if found.len() < k {
+                    heap_push(found, (dist2, mid as u32));
+                } else {
+                    heap_replace_top(found, (dist2, mid as u32));
+                }
+                if found.len() == k {
+                    r2 = found[0].0;
+                }
+            }
+            let delta = d[axes[mid] as usize];
+            let (near, far) = if delta <= 0.0 {
+                ((lo, mid), (mid + 1, hi))
+            } else {
+                ((mid + 1, hi), (lo, mid))
+            };
+            if delta * delta < r2 && far.0 < far.1 && sp < stack.len() {
+                stack[sp] = (far.0, far.1, delta * delta);
+                sp += 1;
+            }
+            (lo, hi) = near;
+        } else if sp > 0 {
+            sp -= 1;
+            let (a, b, plane2) = stack[sp];
+            // The radius may have shrunk since this side was kept.
+            if plane2 < r2 {
+                (lo, hi) = (a, b);
+            }
+        } else {
+            break;
+        }
+    }
+    r2
+}
+
+/// Binary max-heap on the distance² in `h[0]`.
+fn heap_push(h: &mut Vec<(f32, u32)>, v: (f32, u32)) {
+    h.push(v);
+    let mut i = h.len() - 1;
+    while i > 0 {
+        let parent = (i - 1) / 2;
+        if h[parent].0 >= h[i].0 {
+            break;
+        }
+        h.swap(parent, i);
+        i = parent;
+    }
+}
+
+fn heap_replace_top(h: &mut [(f32, u32)], v: (f32, u32)) {
+    h[0] = v;
+    let n = h.len();
+    let mut i = 0;
+    loop {
+        let (l, r) = (2 * i + 1, 2 * i + 2);
+        let mut largest = i;
+        if l < n && h[l].0 > h[largest].0 {
+            largest = l;
+        }
+        if r < n && h[r].0 > h[largest].0 {
+            largest = r;
+        }
+        if largest == i {
+            break;
+        }
+        h.swap(i, largest);
+        i = largest;
+    }
+}
+
 /// Distance to the k-th nearest position (or to the farthest, if fewer than k).
 pub fn kth_nearest_distance(positions: &[[f32; 3]], axes: &[u8], p: Vec3, k: usize) -> f32 {
     if positions.is_empty() || k == 0 {
@@ -211,6 +310,35 @@ mod tests {
             let mut n = 0;
             for_each_within(&sorted, &axes, p, r2, |_, _| n += 1);
             assert_eq!(n, brute(&pts, p, r2));
+        }
+    }
+
+    #[test]
+    fn k_nearest_matches_brute_force_with_a_filter_and_a_cap() {
+        let mut rng = Rng::stream(6, 0, 0, Purpose::Photon);
+        let pts: Vec<[f32; 3]> = (0..20_000)
+            .map(|_| [rng.next_f32(), rng.next_f32() * 0.1, rng.next_f32()])
+            .collect();
+        let (sorted, axes) = ordered(&pts);
+        let mut found = Vec::new();
+        for trial in 0..200 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32() * 0.1, rng.next_f32());
+            let (k, r2_max) = (1 + trial % 60, if trial % 3 == 0 { 1e-3 } else { 1.0 });
+            // Keep every other photon (by its position's parity), as a normal test would.
+            let keep = |i: usize| ((sorted[i][0] * 1e4) as u32).is_multiple_of(2);
+            let r2 = k_nearest_within(&sorted, &axes, p, k, r2_max, keep, &mut found);
+            let mut want: Vec<f32> = (0..sorted.len())
+                .filter(|&i| keep(i))
+                .map(|i| (Vec3::from_array(sorted[i]) - p).length_squared())
+                .filter(|&d2| d2 < r2_max)
+                .collect();
+            want.sort_by(f32::total_cmp);
+            want.truncate(k);
+            let mut got: Vec<f32> = found.iter().map(|f| f.0).collect();
+            got.sort_by(f32::total_cmp);
+            assert_eq!(got, want, "trial {trial}");
+            let expect_r2 = if want.len() == k { want[k - 1] } else { r2_max };
+            assert_eq!(r2, expect_r2);
         }
     }
 

@@ -44,13 +44,14 @@ impl PhotonBatch {
         self.headers.is_empty()
     }
 
-    /// Stores a photon's flux in this batch's format. Photons with no (or non-finite)
-    /// flux are never stored.
-    pub fn push(&mut self, grid: &BinGrid, pos: Vec3, dir: Vec3, flux: &[f32]) {
+    /// Stores a photon's flux in this batch's format, with the landing surface's normal
+    /// turned towards the side the photon came from. Photons with no (or non-finite) flux
+    /// are never stored.
+    pub fn push(&mut self, grid: &BinGrid, pos: Vec3, normal: Vec3, flux: &[f32]) {
         if !(spd::sum(flux) > 0.0) || !spd::all_finite(flux) {
             return;
         }
-        self.headers.push(PhotonHeader::new(pos, dir));
+        self.headers.push(PhotonHeader::new(pos, normal));
         match (self.record, grid.smits()) {
             (Record::Compact, Some(smits)) => {
                 let rec = match spd::single_nonzero(flux) {
@@ -78,13 +79,33 @@ impl PhotonBatch {
     }
 }
 
+/// Smallest cosine between a photon's stored normal and a query's normal for the photon to
+/// count (37°): adjacent facets of a tessellated curved surface pass, a perpendicular or
+/// opposite face does not.
+pub const MIN_NORMAL_COS: f32 = 0.8;
+
+/// How a density estimate chooses its photons (see [`PhotonMap::estimate`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Kernel {
+    /// Neighbours the radius adapts to; 0 for a fixed radius.
+    pub k: usize,
+    /// Largest radius searched (the fixed radius when `k` is 0), scene units.
+    pub r_max: f32,
+    /// First radius searched: a range search there that finds k photons settles the
+    /// query; else one bounded k-nearest search out to `r_max` does (the typical k-nearest
+    /// radius is a good start).
+    pub r_start: f32,
+    /// This pass's Knaus–Zwicker factor r_k/r_1 (≤ 1).
+    pub shrink: f32,
+}
+
 /// A searchable photon map.
 #[derive(Clone, Debug)]
 pub struct PhotonMap {
     record: Record,
     stride: usize,
     positions: Vec<[f32; 3]>,
-    dirs: Vec<u32>,
+    normals: Vec<u32>,
     flux: Vec<f32>,
     axes: Vec<u8>,
     spikes: usize,
@@ -97,19 +118,19 @@ impl PhotonMap {
         let (order, axes) = kdtree::build_order(&raw_pos);
         let stride = batch.stride;
         let mut positions = Vec::with_capacity(order.len());
-        let mut dirs = Vec::with_capacity(order.len());
+        let mut normals = Vec::with_capacity(order.len());
         let mut flux = Vec::with_capacity(batch.flux.len());
         for &i in &order {
             let i = i as usize;
             positions.push(raw_pos[i]);
-            dirs.push(batch.headers[i].dir);
+            normals.push(batch.headers[i].normal);
             flux.extend_from_slice(&batch.flux[i * stride..(i + 1) * stride]);
         }
         Self {
             record: batch.record,
             stride,
             positions,
-            dirs,
+            normals,
             flux,
             axes,
             spikes: batch.spikes,
@@ -135,11 +156,16 @@ impl PhotonMap {
 
     /// Exact bytes of the records and the search structure (kd axis bytes).
     pub fn memory_bytes(&self) -> usize {
-        self.positions.len() * 12 + self.dirs.len() * 4 + self.flux.len() * 4 + self.axes.len()
+        self.positions.len() * 12 + self.normals.len() * 4 + self.flux.len() * 4 + self.axes.len()
     }
 
     pub fn positions(&self) -> &[[f32; 3]] {
         &self.positions
+    }
+
+    /// The octahedral code of stored photon `i`'s normal.
+    pub fn normal_code(&self, i: usize) -> u32 {
+        self.normals[i]
     }
 
     /// Median distance from a spread of stored photons to their k-th nearest neighbour: a
@@ -168,46 +194,125 @@ impl PhotonMap {
         Some(d[d.len() / 2])
     }
 
-    /// Adds to `out` (N bins) the flux of every photon within `radius` of `p` that arrived
-    /// on the side `n` faces (travel direction · n < 0). Returns how many were found.
-    /// Compact records are expanded as the paper prescribes (spike → its bin; triplet →
-    /// Smits), summed per Smits branch so that each photon costs O(1).
-    pub fn gather(&self, grid: &BinGrid, p: Vec3, n: Vec3, radius: f32, out: &mut [f32]) -> usize {
-        let mut count = 0;
-        let r2 = radius * radius;
-        let facing = |i: usize| super::record::oct_decode(self.dirs[i]).dot(n) < 0.0;
-        match self.record {
-            Record::Full => {
-                let s = self.stride;
-                kdtree::for_each_within(&self.positions, &self.axes, p, r2, |i, _| {
-                    if facing(i) {
-                        spd::add_scaled(out, &self.flux[i * s..(i + 1) * s], 1.0);
-                        count += 1;
-                    }
-                });
+    /// Whether stored photon `i` lies on the query's surface and side: its normal within
+    /// 37° of `n`, and within a flat slab about the query's tangent plane (|Δ·n| ≤ |Δ|/8,
+    /// so a curved surface still counts out to a quarter of its radius of curvature, and a
+    /// parallel surface a gap g away only beyond 8g). Density estimation has no visibility:
+    /// coplanar surfaces on both sides of a wall still share photons within one radius.
+    #[inline]
+    fn same_surface(&self, i: usize, p: Vec3, n: Vec3) -> bool {
+        let d = Vec3::from_array(self.positions[i]) - p;
+        let h = d.dot(n);
+        h * h <= (1.0 / 64.0) * d.length_squared() + 1e-12
+            && super::record::oct_within(self.normals[i], n, MIN_NORMAL_COS)
+    }
+
+    /// Adds to `out` (N bins) the flux of the photons of a density estimate at `p` on a
+    /// surface facing `n`, and returns the estimate's radius r (the caller divides by
+    /// π r²). Only photons on the same surface and side count ([`Self::same_surface`]).
+    ///
+    /// With `kernel.k > 0` the radius adapts per query (Jensen's k-nearest-neighbour
+    /// estimate): r_k is the distance to the k-th nearest photon within `r_max` (or
+    /// `r_max` if fewer), and the photons strictly inside r = `shrink`·r_k are summed.
+    /// For photons of density λ, (k−1) of them fall uniformly inside r_k, so the expected
+    /// sum is (k−1)·shrink² photons over π·shrink²·r_k², and E[(k−1)/(π r_k²)] = λ: the
+    /// estimate is unbiased in a uniform region for every shrink ≤ 1, and the Knaus–Zwicker
+    /// shrink over passes makes it consistent elsewhere. With `k == 0` the radius is fixed:
+    /// `shrink`·`r_max`.
+    pub fn estimate(
+        &self,
+        grid: &BinGrid,
+        p: Vec3,
+        n: Vec3,
+        kernel: Kernel,
+        found: &mut Vec<(f32, u32)>,
+        out: &mut [f32],
+    ) -> f32 {
+        let accept = |i: usize| self.same_surface(i, p, n);
+        if kernel.k == 0 {
+            let r = kernel.r_max * kernel.shrink;
+            found.clear();
+            kdtree::for_each_within(&self.positions, &self.axes, p, r * r, |i, d2| {
+                if accept(i) {
+                    found.push((d2, i as u32));
+                }
+            });
+            self.sum_flux(grid, found.iter().map(|f| f.1 as usize), out);
+            return r;
+        }
+        // The k nearest within r_max are the k nearest within any smaller radius that
+        // holds k photons: most queries find them within the first radius (a range search
+        // and a selection); the rest run one bounded k-nearest search out to r_max.
+        let r = kernel.r_start.clamp(f32::MIN_POSITIVE, kernel.r_max);
+        found.clear();
+        kdtree::for_each_within(&self.positions, &self.axes, p, r * r, |i, d2| {
+            if accept(i) {
+                found.push((d2, i as u32));
             }
-            Record::Compact => {
+        });
+        let r2_k = if found.len() >= kernel.k {
+            let by_distance = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0);
+            let (_, kth, _) = found.select_nth_unstable_by(kernel.k - 1, by_distance);
+            kth.0
+        } else {
+            let r2_max = kernel.r_max * kernel.r_max;
+            kdtree::k_nearest_within(
+                &self.positions,
+                &self.axes,
+                p,
+                kernel.k,
+                r2_max,
+                accept,
+                found,
+            )
+        };
+        let r2 = r2_k * kernel.shrink * kernel.shrink;
+        let inside = found.iter().filter(|f| f.0 < r2).map(|f| f.1 as usize);
+        self.sum_flux(grid, inside, out);
+        r2.sqrt()
+    }
+
+    /// Adds the flux of photons `ids` to `out` (N bins). Compact records are expanded as
+    /// the paper prescribes (spike → its bin; triplet → Smits), summed per Smits branch
+    /// so that each photon costs O(1).
+    fn sum_flux(&self, grid: &BinGrid, ids: impl Iterator<Item = usize>, out: &mut [f32]) {
+        match (self.record, grid.smits()) {
+            (Record::Compact, Some(smits)) => {
                 let mut sums = BranchSums::default();
-                kdtree::for_each_within(&self.positions, &self.axes, p, r2, |i, _| {
-                    if facing(i) {
-                        let rec = [self.flux[3 * i], self.flux[3 * i + 1], self.flux[3 * i + 2]];
-                        match decode_spike(rec) {
-                            Some((bin, a)) => {
-                                if let Some(v) = out.get_mut(bin) {
-                                    *v += a;
-                                }
+                for i in ids {
+                    let rec = [self.flux[3 * i], self.flux[3 * i + 1], self.flux[3 * i + 2]];
+                    match decode_spike(rec) {
+                        Some((bin, a)) => {
+                            if let Some(v) = out.get_mut(bin) {
+                                *v += a;
                             }
-                            None => sums.add(rec, 1.0),
                         }
-                        count += 1;
+                        None => sums.add(rec, 1.0),
                     }
-                });
-                if let Some(smits) = grid.smits() {
-                    sums.expand_into(smits, out);
+                }
+                sums.expand_into(smits, out);
+            }
+            _ => {
+                let s = self.stride;
+                for i in ids {
+                    spd::add_scaled(out, &self.flux[i * s..(i + 1) * s], 1.0);
                 }
             }
         }
-        count
+    }
+
+    /// Adds to `out` (N bins) the flux of every photon within `radius` of `p` on the
+    /// surface and side `n` faces (a fixed-radius estimate). Returns how many were found.
+    pub fn gather(&self, grid: &BinGrid, p: Vec3, n: Vec3, radius: f32, out: &mut [f32]) -> usize {
+        let mut found = Vec::new();
+        let kernel = Kernel {
+            k: 0,
+            r_max: radius,
+            r_start: radius,
+            shrink: 1.0,
+        };
+        self.estimate(grid, p, n, kernel, &mut found, out);
+        found.len()
     }
 
     /// The flux of stored photon `i` in N bins (for tests and the probe).

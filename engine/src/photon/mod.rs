@@ -1,11 +1,13 @@
 //! The photon pass and photon maps: tracing with full N-bin flux, splitting at
 //! dispersive glass, storage in full / compact / RGB records, and kd-tree search.
 
+pub mod irradiance;
 pub mod kdtree;
 pub mod map;
 pub mod record;
 pub mod trace;
 
-pub use map::{PhotonBatch, PhotonMap};
+pub use irradiance::IrradianceCache;
+pub use map::{Kernel, PhotonBatch, PhotonMap};
 pub use record::{Record, Storage};
 pub use trace::{PhotonPass, PhotonSettings, TraceStop, split_dispersive, trace_photons};

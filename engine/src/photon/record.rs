@@ -5,13 +5,14 @@
 //!
 //! | storage   | header                         | flux                              | kd axis | bytes/photon |
 //! |-----------|--------------------------------|-----------------------------------|---------|--------------|
-//! | `full`    | position 3×f32, direction u32  | N × f32                           | u8      | 17 + 4N      |
-//! | `compact` | position 3×f32, direction u32  | 3 × f32: RGB triplet or spike     | u8      | 29           |
-//! | `rgb`     | position 3×f32, direction u32  | 3 × f32: linear sRGB              | u8      | 29           |
+//! | `full`    | position 3×f32, normal u32     | N × f32                           | u8      | 17 + 4N      |
+//! | `compact` | position 3×f32, normal u32     | 3 × f32: RGB triplet or spike     | u8      | 29           |
+//! | `rgb`     | position 3×f32, normal u32     | 3 × f32: linear sRGB              | u8      | 29           |
 //!
-//! The direction is the photon's travel direction, octahedral-encoded in 2×16 bits
-//! (error < 0.01°), used only to reject photons that arrived from the other side of a
-//! surface. A compact **spike** record is `(-1.0, bin as f32, amplitude)`: lossless, since
+//! The normal is the landing surface's normal on the side the photon arrived from,
+//! octahedral-encoded in 2×16 bits (error < 0.01°). Lambertian surfaces need no incoming
+//! direction; the normal lets a density estimate keep only photons of the query's own
+//! surface and side (no leaks through thin walls, round corners or onto the back face). A compact **spike** record is `(-1.0, bin as f32, amplitude)`: lossless, since
 //! a valid RGB triplet is never negative and an f32 holds every bin index exactly.
 
 use glam::Vec3;
@@ -108,21 +109,24 @@ impl std::str::FromStr for Storage {
     }
 }
 
-/// Position and direction of a stored photon: 16 bytes.
+/// Position and surface normal of a stored photon: 16 bytes. The normal is the landing
+/// surface's geometric normal turned towards the side the photon came from: a density
+/// estimate counts a photon only on the same side of the same surface as the query, which
+/// keeps light from leaking through thin walls and round corners.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PhotonHeader {
     pub pos: [f32; 3],
-    pub dir: u32,
+    pub normal: u32,
 }
 
 const _: () = assert!(size_of::<PhotonHeader>() == 16);
 
 impl PhotonHeader {
-    pub fn new(pos: Vec3, dir: Vec3) -> Self {
+    pub fn new(pos: Vec3, normal: Vec3) -> Self {
         Self {
             pos: pos.to_array(),
-            dir: oct_encode(dir),
+            normal: oct_encode(normal),
         }
     }
 
@@ -132,8 +136,8 @@ impl PhotonHeader {
     }
 
     #[inline]
-    pub fn direction(&self) -> Vec3 {
-        oct_decode(self.dir)
+    pub fn normal(&self) -> Vec3 {
+        oct_decode(self.normal)
     }
 }
 
@@ -170,6 +174,13 @@ pub fn oct_encode(d: Vec3) -> u32 {
 }
 
 pub fn oct_decode(e: u32) -> Vec3 {
+    oct_unnormalized(e).normalize_or_zero()
+}
+
+/// The decoded direction before normalisation (length between 1/√3 and 1): enough for
+/// a sign or an angle test, without the square root.
+#[inline]
+pub fn oct_unnormalized(e: u32) -> Vec3 {
     let u = (e & 0xFFFF) as f32 / 65535.0 * 2.0 - 1.0;
     let v = (e >> 16) as f32 / 65535.0 * 2.0 - 1.0;
     let z = 1.0 - u.abs() - v.abs();
@@ -178,7 +189,16 @@ pub fn oct_decode(e: u32) -> Vec3 {
     } else {
         (u, v)
     };
-    Vec3::new(x, y, z).normalize_or_zero()
+    Vec3::new(x, y, z)
+}
+
+/// Whether the encoded unit vector `e` is within acos(`min_cos`) of unit `n`
+/// (`min_cos` > 0), without normalising it.
+#[inline]
+pub fn oct_within(e: u32, n: Vec3, min_cos: f32) -> bool {
+    let v = oct_unnormalized(e);
+    let d = v.dot(n);
+    d > 0.0 && d * d >= min_cos * min_cos * v.length_squared()
 }
 
 #[cfg(test)]

@@ -170,9 +170,9 @@ fn trace_one(
             path.depth += 1;
             match &scene.material(&hit).kind {
                 SurfaceKind::Diffuse { reflectance } => {
-                    global.push(grid, p, path.dir, &path.flux);
+                    global.push(grid, p, nf, &path.flux);
                     if caustic && path.specular_seen && !path.diffuse_seen {
-                        caustics.push(grid, p, path.dir, &path.flux);
+                        caustics.push(grid, p, nf, &path.flux);
                     }
                     if !russian_roulette(&mut path.flux, reflectance, rng.next_f32()) {
                         break;

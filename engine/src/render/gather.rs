@@ -6,7 +6,7 @@
 use glam::Vec3;
 
 use crate::materials::{reflect, russian_roulette, scatter_dielectric};
-use crate::photon::PhotonMap;
+use crate::photon::{IrradianceCache, Kernel, PhotonMap};
 use crate::sampling::{Rng, cosine_hemisphere};
 use crate::scene::{SpectralScene, SurfaceKind};
 use crate::spectral::spd;
@@ -16,8 +16,14 @@ pub struct Gather<'a> {
     pub scene: &'a SpectralScene,
     pub global: &'a PhotonMap,
     pub caustic: Option<&'a PhotonMap>,
-    pub r_global: f32,
-    pub r_caustic: f32,
+    /// The global map's precomputed irradiance, read by final-gather rays (None: they
+    /// run their own density estimates).
+    pub irradiance: Option<&'a IrradianceCache>,
+    /// How the global and caustic maps' density estimates choose photons.
+    pub global_kernel: Kernel,
+    pub caustic_kernel: Kernel,
+    /// Smallest radius a density estimate divides by (scene-scaled).
+    pub r_min: f32,
     pub final_gather_rays: u32,
     /// Safety cap on a path's specular bounces (Russian roulette ends paths first).
     pub max_bounces: u32,
@@ -30,6 +36,8 @@ pub struct Scratch {
     acc: Vec<f32>,
     fg: Vec<f32>,
     fg_t: Vec<f32>,
+    /// The k-nearest search's candidates.
+    found: Vec<(f32, u32)>,
 }
 
 impl Scratch {
@@ -40,6 +48,7 @@ impl Scratch {
             acc: vec![0.0; n],
             fg: vec![0.0; n],
             fg_t: vec![0.0; n],
+            found: Vec::new(),
         }
     }
 }
@@ -83,6 +92,12 @@ impl Gather<'_> {
         s.throughput.fill(1.0);
         for _ in 0..self.max_bounces {
             let Some(hit) = scene.intersect(origin, dir) else {
+                // An escaping path sees the sky, if the scene has one.
+                if let Some(sky) = &scene.environment {
+                    for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(sky) {
+                        *o += t * l;
+                    }
+                }
                 return;
             };
             let (p, n, nf, front) = (hit.p, hit.n, hit.nf, hit.front);
@@ -122,7 +137,14 @@ impl Gather<'_> {
         s.acc.fill(0.0);
         if self.final_gather_rays == 0 {
             // Direct visualisation of the global map: all light in one estimate.
-            self.density(self.global, p, nf, self.r_global, &mut s.acc);
+            self.density(
+                self.global,
+                p,
+                nf,
+                self.global_kernel,
+                &mut s.found,
+                &mut s.acc,
+            );
             spd::mul_assign(&mut s.acc, reflectance);
             spd::scale(&mut s.acc, inv_pi);
             return;
@@ -135,7 +157,7 @@ impl Gather<'_> {
         spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
         // Caustics from the caustic map (irradiance, converted to radiance below).
         if let Some(cm) = self.caustic {
-            self.density(cm, p, nf, self.r_caustic, &mut s.tmp);
+            self.density(cm, p, nf, self.caustic_kernel, &mut s.found, &mut s.tmp);
             spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
         }
         // Indirect light: final gather. Cosine sampling makes each ray's weight ρ, i.e.
@@ -149,6 +171,7 @@ impl Gather<'_> {
                 rng,
                 &mut s.fg_t,
                 &mut s.tmp,
+                &mut s.found,
             );
             spd::add_scaled(&mut s.fg, &s.tmp, 1.0);
         }
@@ -171,6 +194,7 @@ impl Gather<'_> {
         rng: &mut Rng,
         t: &mut [f32],
         out: &mut [f32],
+        found: &mut Vec<(f32, u32)>,
     ) {
         let scene = self.scene;
         out.fill(0.0);
@@ -182,7 +206,15 @@ impl Gather<'_> {
             let (p, n, nf) = (hit.p, hit.n, hit.nf);
             match &scene.material(&hit).kind {
                 SurfaceKind::Diffuse { reflectance } => {
-                    self.density(self.global, p, nf, self.r_global, out);
+                    // No cache point within the search cap means (almost surely) fewer than
+                    // a handful of photons there: the irradiance is taken as 0 rather than
+                    // paying a full search for it.
+                    match self.irradiance {
+                        Some(c) => {
+                            c.lookup(&self.scene.grid, p, nf, found, out);
+                        }
+                        None => self.density(self.global, p, nf, self.global_kernel, found, out),
+                    }
                     spd::mul_assign(out, reflectance);
                     spd::mul_assign(out, t);
                     spd::scale(out, std::f32::consts::FRAC_1_PI);
@@ -249,9 +281,19 @@ impl Gather<'_> {
     }
 
     /// Irradiance estimate (N bins) from a photon map: Σ flux / (π r²), into `out`.
-    fn density(&self, map: &PhotonMap, p: Vec3, nf: Vec3, r: f32, out: &mut [f32]) {
+    fn density(
+        &self,
+        map: &PhotonMap,
+        p: Vec3,
+        nf: Vec3,
+        kernel: Kernel,
+        found: &mut Vec<(f32, u32)>,
+        out: &mut [f32],
+    ) {
         out.fill(0.0);
-        map.gather(&self.scene.grid, p, nf, r, out);
+        let r = map
+            .estimate(&self.scene.grid, p, nf, kernel, found, out)
+            .max(self.r_min);
         spd::scale(out, 1.0 / (std::f32::consts::PI * r * r));
     }
 }

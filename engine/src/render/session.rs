@@ -16,7 +16,9 @@ use rayon::prelude::*;
 use super::film::{Film, Image};
 use super::gather::{Gather, Scratch};
 use super::settings::{RenderSettings, SettingsError, default_photon_budget};
-use crate::photon::{PhotonPass, PhotonSettings, Storage, TraceStop, trace_photons};
+use crate::photon::{
+    IrradianceCache, Kernel, PhotonPass, PhotonSettings, Storage, TraceStop, trace_photons,
+};
 use crate::sampling::{Purpose, Rng};
 use crate::scene::{Scene, SpectralScene};
 
@@ -47,6 +49,8 @@ pub struct MemoryReport {
     pub global_map: usize,
     pub caustic_map: usize,
     pub photon_maps: usize,
+    /// The global map's precomputed irradiance (final gathering only).
+    pub irradiance_cache: usize,
     pub film: usize,
     pub bvh: usize,
 }
@@ -68,7 +72,8 @@ pub struct RenderStats {
     pub photon_seconds: f64,
     pub gather_seconds: f64,
     pub last_pass_seconds: f64,
-    /// Radii used by the latest pass.
+    /// Typical (median k-nearest) gather radii of the latest pass; each query adapts its
+    /// own radius to its k nearest photons.
     pub r_global: f32,
     pub r_caustic: f32,
     /// Photons emitted in the latest pass (fewer than asked when the budget required).
@@ -92,7 +97,19 @@ pub struct RenderSession {
     probes: Vec<Probe>,
     /// Photon-map bytes per emitted photon in the latest pass (for the budget).
     bytes_per_emitted: Option<f64>,
+    /// This pass's typical (median k-nearest) radii of the global and caustic maps.
+    typical: (f32, f32),
 }
+
+/// The global map's search cap, in typical radii and as a fraction of the scene diagonal
+/// (the larger wins).
+const GLOBAL_CAP_TYPICAL: f32 = 8.0;
+const GLOBAL_CAP_DIAGONAL: f32 = 0.02;
+/// Final-gather rays read irradiance precomputed at every 4th global photon (Christensen
+/// 1999 uses a quarter too).
+const PRECOMPUTE_EVERY: usize = 8;
+/// The caustic map's search cap, in typical radii.
+const CAUSTIC_CAP_TYPICAL: f32 = 4.0;
 
 /// Fault injection for reliability tests: while set, every pass panics. Process-wide and
 /// never set by the program itself; only the viewer's panic-recovery test uses it.
@@ -151,6 +168,7 @@ impl RenderSession {
             cancel: Arc::new(AtomicBool::new(false)),
             probes: Vec::new(),
             bytes_per_emitted: None,
+            typical: (0.0, 0.0),
         }
     }
 
@@ -251,13 +269,29 @@ impl RenderSession {
         let pass = self.film.passes() + 1;
         let (maps, photons) = self.trace_within_budget(pass)?;
         let photon_done = Instant::now();
-        let (r_global, r_caustic) = self.radii(&maps);
+        let (global_kernel, caustic_kernel) = self.kernels(&maps);
+        let (r_global, r_caustic) = self.typical;
+        let r_min = 1e-6 * self.scene.diagonal().max(1e-6);
+        // Final-gather rays read precomputed irradiance (one density estimate per
+        // `PRECOMPUTE_EVERY` photons instead of one per ray).
+        let irradiance = (self.settings.final_gather_rays > 0).then(|| {
+            IrradianceCache::build(
+                &maps.global,
+                &self.scene.grid,
+                global_kernel,
+                PRECOMPUTE_EVERY,
+                r_min,
+                global_kernel.r_max,
+            )
+        });
         let gather = Gather {
             scene: &self.scene,
             global: &maps.global,
             caustic: maps.caustic.as_ref(),
-            r_global,
-            r_caustic,
+            irradiance: irradiance.as_ref(),
+            global_kernel,
+            caustic_kernel,
+            r_min,
             final_gather_rays: self.settings.final_gather_rays,
             max_bounces: self.settings.max_bounces,
         };
@@ -266,6 +300,7 @@ impl RenderSession {
         self.add_probe_spectra(probe_spectra);
         let times = (start, photon_done, Instant::now());
         self.record_pass(&maps, photons, (r_global, r_caustic), times);
+        self.memory.irradiance_cache = irradiance.as_ref().map_or(0, |c| c.memory_bytes());
         self.radius_sq_factor =
             next_radius_sq_factor(self.radius_sq_factor, pass, self.settings.alpha);
         Ok(())
@@ -310,10 +345,12 @@ impl RenderSession {
         Ok((maps, photons))
     }
 
-    /// This pass's gather radii: the first pass's (from the photons themselves unless the
-    /// settings fix them) shrunk by the Knaus–Zwicker factor, never below 1e-6 of the
-    /// scene's diagonal.
-    fn radii(&mut self, maps: &PhotonPass) -> (f32, f32) {
+    /// This pass's density-estimate kernels. Each map's radius adapts per query to its
+    /// k nearest photons (`global_k`, `caustic_k`), searched out to a cap, and shrinks
+    /// with passes by the Knaus–Zwicker factor; a radius given in the settings is used as
+    /// a fixed radius instead. The first pass also measures the median k-nearest distance
+    /// over the photons (`typical`), which sets the caps and is reported.
+    fn kernels(&mut self, maps: &PhotonPass) -> (Kernel, Kernel) {
         let scene = &self.scene;
         let fallback = || {
             let area = scene.diffuse_area.max(1e-12);
@@ -332,11 +369,40 @@ impl RenderSession {
         {
             self.r1_caustic = c.typical_knn_radius(self.settings.caustic_k, 256);
         }
-        let r_min = 1e-6 * scene.diagonal().max(1e-6);
-        let k = self.radius_sq_factor.sqrt() as f32;
-        let r_global = (self.r1_global.unwrap_or_else(fallback) * k).max(r_min);
-        let r_caustic = (self.r1_caustic.unwrap_or(r_global) * k).max(r_min);
-        (r_global, r_caustic)
+        let diag = scene.diagonal().max(1e-6);
+        let shrink = self.radius_sq_factor.sqrt() as f32;
+        let typical_global = self.r1_global.unwrap_or_else(fallback);
+        let typical_caustic = self.r1_caustic.unwrap_or(typical_global);
+        let kernel = |fixed: Option<f32>, k: usize, typical: f32, cap: f32| match fixed {
+            Some(r) => Kernel {
+                k: 0,
+                r_max: r,
+                r_start: r,
+                shrink,
+            },
+            None => Kernel {
+                k,
+                r_max: cap.max(1e-6 * diag),
+                r_start: 1.2 * typical,
+                shrink,
+            },
+        };
+        // Caps: dim regions of the global map need far more than the median radius (a
+        // spot-lit scene's median is set by the spot); caustics stay sharp with a tight cap.
+        let global = kernel(
+            self.settings.global_radius,
+            self.settings.global_k,
+            typical_global,
+            (GLOBAL_CAP_TYPICAL * typical_global).max(GLOBAL_CAP_DIAGONAL * diag),
+        );
+        let caustic = kernel(
+            self.settings.caustic_radius,
+            self.settings.caustic_k,
+            typical_caustic,
+            CAUSTIC_CAP_TYPICAL * typical_caustic,
+        );
+        self.typical = (typical_global * shrink, typical_caustic * shrink);
+        (global, caustic)
     }
 
     /// One sample per pixel, rows in parallel; returns the pass image (linear sRGB) and the

@@ -64,9 +64,9 @@ impl Ctx<'_> {
 /// Loads a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
+    let bytes = std::fs::read(path).map_err(|reason| SceneError::Io {
         file: file.clone(),
-        source,
+        reason,
     })?;
     let name = path
         .file_stem()
@@ -88,174 +88,344 @@ pub fn load_from_slice(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<
 }
 
 fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
-    if bytes.is_empty() {
-        return Err(ctx.err("document", "the file is empty"));
-    }
-    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| ctx.err("document", e.to_string()))?;
+    // The gltf crate refuses unknown required extensions as "invalid": say which and why first.
+    check_required_names(&peek_required_extensions(bytes), ctx)?;
+    let gltf = parse_document(bytes, ctx)?;
     let doc = &gltf.document;
-    for ext in doc.extensions_required() {
-        if !SUPPORTED_EXTENSIONS.contains(&ext) {
-            return Err(ctx.err(
-                "extensionsRequired",
-                format!("unsupported required extension '{ext}'"),
-            ));
-        }
-    }
-    for buffer in doc.buffers() {
-        if let gltf::buffer::Source::Uri(uri) = buffer.source() {
-            check_relative_uri(uri, ctx, &format!("buffers[{}]", buffer.index()))?;
-            if !uri.starts_with("data:") && ctx.base.is_none() {
-                return Err(ctx.err(
-                    format!("buffers[{}]", buffer.index()),
-                    format!("external buffer '{uri}' but no folder to read it from"),
-                ));
-            }
-        }
-    }
+    check_extensions(doc, ctx)?;
+    check_buffers(doc, ctx)?;
     let buffers = gltf::import_buffers(doc, ctx.base, gltf.blob.clone())
         .map_err(|e| ctx.err("buffers", e.to_string()))?;
     let root = doc
         .default_scene()
         .or_else(|| doc.scenes().next())
         .ok_or_else(|| ctx.err("scenes", "the file has no scene"))?;
-
-    let mut out = Scene {
-        name: "scene".to_string(),
-        triangles: Vec::new(),
-        triangle_material: Vec::new(),
-        materials: Vec::new(),
-        lights: Vec::new(),
-        camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 0.8),
-        warnings: Vec::new(),
+    let mut walk = Walk {
+        ctx,
+        doc,
+        buffers: &buffers,
+        material_map: vec![None; doc.materials().len() + 1],
+        camera: None,
+        degenerate: 0,
+        out: Scene {
+            name: "scene".to_string(),
+            triangles: Vec::new(),
+            triangle_material: Vec::new(),
+            materials: Vec::new(),
+            lights: Vec::new(),
+            environment: None,
+            camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 0.8),
+            warnings: Vec::new(),
+        },
     };
-    // glTF material index → ours; the default material goes last.
-    let mut material_map: Vec<Option<u32>> = vec![None; doc.materials().len() + 1];
-    let mut camera = None;
-    let mut degenerate = 0usize;
+    walk.nodes(root)?;
+    walk.finish()
+}
 
-    // Depth-first in document order (children pushed in reverse so they pop in order).
-    let mut stack: Vec<(gltf::Node, Mat4, usize)> =
-        root.nodes().map(|n| (n, Mat4::IDENTITY, 0)).collect();
-    stack.reverse();
-    while let Some((node, parent, depth)) = stack.pop() {
-        let element = format!("nodes[{}]", node.index());
-        if depth > MAX_NODE_DEPTH {
-            return Err(ctx.err(element, "node hierarchy deeper than 64 (a cycle?)"));
+/// The document, or an error that says what the file is when it is not glTF.
+fn parse_document(bytes: &[u8], ctx: &Ctx) -> Result<gltf::Gltf, SceneError> {
+    if bytes.is_empty() {
+        return Err(ctx.err("document", "the file is empty"));
+    }
+    gltf::Gltf::from_slice(bytes).map_err(|e| {
+        let head = String::from_utf8_lossy(&bytes[..bytes.len().min(512)]);
+        let first = head.trim_start();
+        let looks_obj = ctx.file.to_ascii_lowercase().ends_with(".obj")
+            || first.lines().take(20).any(|l| {
+                let l = l.trim_start();
+                l.starts_with("v ") || l.starts_with("vn ") || l.starts_with("mtllib ")
+            });
+        let message = if looks_obj {
+            "this is a Wavefront OBJ file, not glTF: export glTF 2.0 (.gltf or .glb) instead, e.g. in Blender with File → Export → glTF 2.0".to_string()
+        } else if !(first.starts_with('{') || bytes.starts_with(b"glTF")) {
+            format!("not a glTF 2.0 file (neither JSON nor GLB): {e}")
+        } else {
+            e.to_string()
+        };
+        ctx.err("document", message)
+    })
+}
+
+/// Extensions that compress or re-encode data this loader cannot read: valid glTF, but
+/// unsupported, and a re-export without them works.
+const UNSUPPORTED_ENCODINGS: &[(&str, &str)] = &[
+    (
+        "KHR_draco_mesh_compression",
+        "Draco mesh compression (Blender: uncheck Compression when exporting)",
+    ),
+    (
+        "EXT_meshopt_compression",
+        "meshoptimizer compression (re-export without it, e.g. gltfpack without -c)",
+    ),
+    (
+        "KHR_mesh_quantization",
+        "quantized vertex attributes (re-export with float positions)",
+    ),
+    ("KHR_texture_basisu", "Basis Universal textures"),
+    ("EXT_texture_webp", "WebP textures"),
+];
+
+/// `extensionsRequired` read straight from the JSON (of a .gltf, or of a .glb's first
+/// chunk), before the gltf crate's validation.
+fn peek_required_extensions(bytes: &[u8]) -> Vec<String> {
+    let json = if bytes.starts_with(b"glTF") && bytes.len() >= 20 {
+        let len = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
+        &bytes[20..(20usize.saturating_add(len)).min(bytes.len())]
+    } else {
+        bytes
+    };
+    serde_json::from_slice::<serde_json::Value>(json)
+        .ok()
+        .and_then(|v| {
+            v.get("extensionsRequired")?.as_array().map(|a| {
+                a.iter()
+                    .filter_map(|e| e.as_str().map(str::to_string))
+                    .collect()
+            })
+        })
+        .unwrap_or_default()
+}
+
+fn check_extensions(doc: &gltf::Document, ctx: &Ctx) -> Result<(), SceneError> {
+    let names: Vec<String> = doc.extensions_required().map(str::to_string).collect();
+    check_required_names(&names, ctx)
+}
+
+fn check_required_names(names: &[String], ctx: &Ctx) -> Result<(), SceneError> {
+    for ext in names.iter().map(String::as_str) {
+        if let Some((_, what)) = UNSUPPORTED_ENCODINGS.iter().find(|(e, _)| *e == ext) {
+            return Err(ctx.err(
+                "extensionsRequired",
+                format!("the file is valid glTF, but it requires '{ext}': {what}, which prismap cannot read yet"),
+            ));
         }
-        let local = Mat4::from_cols_array_2d(&node.transform().matrix());
-        let world = parent * local;
-        if !world.is_finite() {
-            return Err(ctx.err(element, "transform is not finite"));
+        if !SUPPORTED_EXTENSIONS.contains(&ext) {
+            return Err(ctx.err(
+                "extensionsRequired",
+                format!(
+                    "unsupported required extension '{ext}' (prismap reads {})",
+                    SUPPORTED_EXTENSIONS.join(", ")
+                ),
+            ));
         }
-        if let Some(mesh) = node.mesh() {
-            for prim in mesh.primitives() {
-                let pel = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
-                if prim.mode() != gltf::mesh::Mode::Triangles {
-                    out.warnings.push(format!(
-                        "{pel}: mode {:?} skipped (only triangles are rendered)",
-                        prim.mode()
-                    ));
-                    continue;
-                }
-                let mat_slot = prim.material().index().unwrap_or(doc.materials().len());
-                let mat_index = match material_map[mat_slot] {
-                    Some(i) => i,
-                    None => {
-                        let m = read_material(&prim.material(), ctx, &mut out.warnings)?;
-                        out.materials.push(m);
-                        let i = (out.materials.len() - 1) as u32;
-                        material_map[mat_slot] = Some(i);
-                        i
-                    }
-                };
-                let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-                let positions: Vec<Vec3> = reader
-                    .read_positions()
-                    .ok_or_else(|| ctx.err(&pel, "no POSITION attribute"))?
-                    .map(Vec3::from)
-                    .collect();
-                if let Some((i, p)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
-                    return Err(ctx.err(
-                        format!("{pel}.POSITION[{i}]"),
-                        format!("value {p} is not finite"),
-                    ));
-                }
-                let indices: Vec<u32> = match reader.read_indices() {
-                    Some(ix) => ix.into_u32().collect(),
-                    None => (0..positions.len() as u32).collect(),
-                };
-                if !indices.len().is_multiple_of(3) {
-                    return Err(ctx.err(
-                        &pel,
-                        format!("{} indices is not a multiple of 3", indices.len()),
-                    ));
-                }
-                if let Some(bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
-                    return Err(ctx.err(
-                        format!("{pel}.indices"),
-                        format!("index {bad} out of range for {} vertices", positions.len()),
-                    ));
-                }
-                for tri in indices.chunks_exact(3) {
-                    let t = [0, 1, 2].map(|k| world.transform_point3(positions[tri[k] as usize]));
-                    if t.iter().any(|v| !v.is_finite()) {
-                        return Err(ctx.err(&pel, "transformed vertex is not finite"));
-                    }
-                    if triangle_normal(&t).0 == 0.0 {
-                        degenerate += 1;
-                        continue;
-                    }
-                    out.triangles.push(t);
-                    out.triangle_material.push(mat_index);
+    }
+    Ok(())
+}
+
+/// External buffers: relative paths inside the scene's folder, and present.
+fn check_buffers(doc: &gltf::Document, ctx: &Ctx) -> Result<(), SceneError> {
+    for buffer in doc.buffers() {
+        let gltf::buffer::Source::Uri(uri) = buffer.source() else {
+            continue;
+        };
+        let element = format!("buffers[{}]", buffer.index());
+        check_relative_uri(uri, ctx, &element)?;
+        if uri.starts_with("data:") {
+            continue;
+        }
+        let Some(base) = ctx.base else {
+            return Err(ctx.err(
+                element,
+                format!("external buffer '{uri}' but no folder to read it from"),
+            ));
+        };
+        let decoded = percent_decode(uri);
+        let path = base.join(&decoded);
+        if !path.is_file() {
+            return Err(ctx.err(
+                element,
+                format!(
+                    "the external buffer '{uri}' is missing (looked for {}): keep the .bin file beside the .gltf, or export a single .glb",
+                    path.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `%20` and friends in a URI, as the gltf crate decodes them.
+fn percent_decode(uri: &str) -> String {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%'
+            && i + 2 < bytes.len()
+            && let Ok(v) = u8::from_str_radix(&uri[i + 1..(i + 3).min(uri.len())], 16)
+        {
+            out.push(v);
+            i += 3;
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// The node walk: meshes, lights and the first camera, in document order.
+struct Walk<'a> {
+    ctx: &'a Ctx<'a>,
+    doc: &'a gltf::Document,
+    buffers: &'a [gltf::buffer::Data],
+    /// glTF material index → ours; the default material goes last.
+    material_map: Vec<Option<u32>>,
+    camera: Option<Camera>,
+    degenerate: usize,
+    out: Scene,
+}
+
+impl Walk<'_> {
+    fn nodes(&mut self, root: gltf::Scene) -> Result<(), SceneError> {
+        // Depth-first in document order (children pushed in reverse so they pop in order).
+        let mut stack: Vec<(gltf::Node, Mat4, usize)> =
+            root.nodes().map(|n| (n, Mat4::IDENTITY, 0)).collect();
+        stack.reverse();
+        while let Some((node, parent, depth)) = stack.pop() {
+            let element = format!("nodes[{}]", node.index());
+            if depth > MAX_NODE_DEPTH {
+                return Err(self
+                    .ctx
+                    .err(element, "node hierarchy deeper than 64 (a cycle?)"));
+            }
+            let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+            if !world.is_finite() {
+                return Err(self.ctx.err(element, "transform is not finite"));
+            }
+            if let Some(mesh) = node.mesh() {
+                for prim in mesh.primitives() {
+                    self.primitive(&mesh, &prim, &world)?;
                 }
             }
+            if let Some(light) = node.light() {
+                let l = read_light(&light, &world, self.ctx, &mut self.out.warnings)?;
+                self.out.lights.push(l);
+            }
+            if let (Some(cam), None) = (node.camera(), &self.camera) {
+                self.camera = Some(read_camera(&cam, &world, self.ctx, &mut self.out.warnings)?);
+            }
+            let children: Vec<_> = node.children().collect();
+            for child in children.into_iter().rev() {
+                stack.push((child, world, depth + 1));
+            }
         }
-        if let Some(light) = node.light() {
-            out.lights.push(read_light(&light, &world, ctx)?);
-        }
-        if let (Some(cam), None) = (node.camera(), &camera) {
-            camera = Some(read_camera(&cam, &world, ctx, &mut out.warnings)?);
-        }
-        let children: Vec<_> = node.children().collect();
-        for child in children.into_iter().rev() {
-            stack.push((child, world, depth + 1));
-        }
+        Ok(())
     }
-    if degenerate > 0 {
-        out.warnings.push(format!(
-            "{degenerate} degenerate (zero-area) triangles skipped"
-        ));
-    }
-    if out.triangles.is_empty() {
-        return Err(ctx.err("meshes", "the scene has no triangles"));
-    }
-    let emissive = out
-        .triangle_material
-        .iter()
-        .any(|&m| out.materials[m as usize].emission.is_some());
-    if !emissive && out.lights.is_empty() {
-        return Err(ctx.err(
-            "lights",
-            "the scene has no light (no emissive material on a triangle, no KHR_lights_punctual light)",
-        ));
-    }
-    out.camera = match camera {
-        Some(c) => c,
-        None => {
-            out.warnings
-                .push("no camera in the scene: framing its bounds".to_string());
-            let (lo, hi) = out.bounds();
-            let c = 0.5 * (lo + hi);
-            let r = 0.5 * (hi - lo).length().max(1e-3);
-            Camera::look_at(
-                c + Vec3::new(0.0, 0.3 * r, 2.4 * r),
-                c,
-                Vec3::Y,
-                45f32.to_radians(),
-            )
+
+    fn material_index(&mut self, m: &gltf::Material) -> Result<u32, SceneError> {
+        let slot = m.index().unwrap_or(self.doc.materials().len());
+        if let Some(i) = self.material_map[slot] {
+            return Ok(i);
         }
-    };
-    Ok(out)
+        let material = read_material(m, self.ctx, &mut self.out.warnings)?;
+        self.out.materials.push(material);
+        let i = (self.out.materials.len() - 1) as u32;
+        self.material_map[slot] = Some(i);
+        Ok(i)
+    }
+
+    fn primitive(
+        &mut self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+        world: &Mat4,
+    ) -> Result<(), SceneError> {
+        let ctx = self.ctx;
+        let pel = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
+        if prim.mode() != gltf::mesh::Mode::Triangles {
+            self.out.warnings.push(format!(
+                "{pel}: mode {:?} skipped (only triangles are rendered)",
+                prim.mode()
+            ));
+            return Ok(());
+        }
+        let mat_index = self.material_index(&prim.material())?;
+        let buffers = self.buffers;
+        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+        let positions: Vec<Vec3> = reader
+            .read_positions()
+            .ok_or_else(|| ctx.err(&pel, "no POSITION attribute"))?
+            .map(Vec3::from)
+            .collect();
+        if let Some((i, p)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
+            return Err(ctx.err(
+                format!("{pel}.POSITION[{i}]"),
+                format!("value {p} is not finite"),
+            ));
+        }
+        let indices: Vec<u32> = match reader.read_indices() {
+            Some(ix) => ix.into_u32().collect(),
+            None => (0..positions.len() as u32).collect(),
+        };
+        if !indices.len().is_multiple_of(3) {
+            return Err(ctx.err(
+                &pel,
+                format!("{} indices is not a multiple of 3", indices.len()),
+            ));
+        }
+        if let Some(bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
+            return Err(ctx.err(
+                format!("{pel}.indices"),
+                format!("index {bad} out of range for {} vertices", positions.len()),
+            ));
+        }
+        for tri in indices.chunks_exact(3) {
+            let t = [0, 1, 2].map(|k| world.transform_point3(positions[tri[k] as usize]));
+            if t.iter().any(|v| !v.is_finite()) {
+                return Err(ctx.err(&pel, "transformed vertex is not finite"));
+            }
+            if triangle_normal(&t).0 == 0.0 {
+                self.degenerate += 1;
+                continue;
+            }
+            self.out.triangles.push(t);
+            self.out.triangle_material.push(mat_index);
+        }
+        Ok(())
+    }
+
+    /// Checks what the whole scene needs: triangles, some light (else the default sky),
+    /// a camera (else one framing the bounds).
+    fn finish(mut self) -> Result<Scene, SceneError> {
+        let out = &mut self.out;
+        if self.degenerate > 0 {
+            out.warnings.push(format!(
+                "{} degenerate (zero-area) triangles skipped",
+                self.degenerate
+            ));
+        }
+        if out.triangles.is_empty() {
+            return Err(self.ctx.err("meshes", "the scene has no triangles"));
+        }
+        let emissive = out
+            .triangle_material
+            .iter()
+            .any(|&m| out.materials[m as usize].emission.is_some());
+        if !emissive && out.lights.is_empty() {
+            out.environment = Some(Spectrum::Illuminant([1.0, 1.0, 1.0]));
+            out.warnings.push(
+                "the scene has no light (no emissive material, no KHR_lights_punctual light): it is lit by a default uniform white (D65) sky of luminance 1, as glTF viewers do; add a light to light it yourself".to_string(),
+            );
+        }
+        out.camera = match self.camera {
+            Some(c) => c,
+            None => {
+                out.warnings
+                    .push("no camera in the scene: framing its bounds".to_string());
+                let (lo, hi) = out.bounds();
+                let c = 0.5 * (lo + hi);
+                let r = 0.5 * (hi - lo).length().max(1e-3);
+                Camera::look_at(
+                    c + Vec3::new(0.0, 0.3 * r, 2.4 * r),
+                    c,
+                    Vec3::Y,
+                    45f32.to_radians(),
+                )
+            }
+        };
+        Ok(self.out)
+    }
 }
 
 /// Refuses absolute paths and `..` in external references (they could read outside the
@@ -405,7 +575,24 @@ fn read_material(
         .transmission()
         .map(|t| t.transmission_factor())
         .unwrap_or(0.0);
-    let kind = if transmission > 0.0 || extras.glass.is_some() {
+    if let Some(n) = m.ior()
+        && !(n == 0.0 || (n.is_finite() && n >= 1.0))
+    {
+        return Err(ctx.err(
+            format!("{element}.KHR_materials_ior.ior"),
+            format!("{n} is not a valid index of refraction (glTF allows 0 or a value ≥ 1; glass is about 1.5)"),
+        ));
+    }
+    // glTF's special ior 0: reflection without refraction (Fresnel F0 = 1).
+    let ior_zero = m.ior() == Some(0.0) && extras.glass.is_none();
+    let kind = if ior_zero {
+        warnings.push(format!(
+            "{element} '{name}': ior 0 (full reflection) rendered as a perfect mirror"
+        ));
+        MaterialKind::Mirror {
+            reflectance: Spectrum::Reflectance(base_rgb),
+        }
+    } else if transmission > 0.0 || extras.glass.is_some() {
         if transmission > 0.0 && transmission < 1.0 {
             warnings.push(format!(
                 "{element} '{name}': transmission {transmission} rendered as clear glass"
@@ -504,6 +691,7 @@ fn read_light(
     light: &gltf::khr_lights_punctual::Light,
     world: &Mat4,
     ctx: &Ctx,
+    warnings: &mut Vec<String>,
 ) -> Result<PunctualLight, SceneError> {
     let element = format!("KHR_lights_punctual.lights[{}]", light.index());
     let name = light
@@ -522,6 +710,13 @@ fn read_light(
     let extras = parse_extras(light.extras(), ctx, &element)?;
     let spectrum = emission_spectrum(rgb, extras.emission.as_ref(), ctx, &element)?;
     let position = world.transform_point3(Vec3::ZERO);
+    // Spot and directional lights shine along the node's −Z.
+    let direction = world.transform_vector3(-Vec3::Z).normalize_or_zero();
+    if light.range().is_some() {
+        warnings.push(format!(
+            "{element} '{name}': range ignored (light falls off as 1/d², as physics has it)"
+        ));
+    }
     let kind = match light.kind() {
         gltf::khr_lights_punctual::Kind::Point => PunctualKind::Point,
         gltf::khr_lights_punctual::Kind::Spot {
@@ -540,7 +735,6 @@ fn read_light(
                     format!("innerConeAngle {inner_cone_angle} must be in [0, outerConeAngle)"),
                 ));
             }
-            let direction = world.transform_vector3(-Vec3::Z).normalize_or_zero();
             if direction == Vec3::ZERO {
                 return Err(ctx.err(&element, "spot direction is degenerate (zero scale?)"));
             }
@@ -551,10 +745,13 @@ fn read_light(
             }
         }
         gltf::khr_lights_punctual::Kind::Directional => {
-            return Err(ctx.err(
-                &element,
-                "directional lights are not supported (use a spot or an emissive quad)",
-            ));
+            if direction == Vec3::ZERO {
+                return Err(ctx.err(
+                    &element,
+                    format!("directional light '{name}': direction is degenerate (zero scale?)"),
+                ));
+            }
+            PunctualKind::Directional { direction }
         }
     };
     Ok(PunctualLight {
@@ -572,14 +769,24 @@ fn read_camera(
     warnings: &mut Vec<String>,
 ) -> Result<Camera, SceneError> {
     let element = format!("cameras[{}]", cam.index());
-    let yfov = match cam.projection() {
-        gltf::camera::Projection::Perspective(p) => p.yfov(),
-        gltf::camera::Projection::Orthographic(_) => {
+    let (yfov, aspect) = match cam.projection() {
+        gltf::camera::Projection::Perspective(p) => (p.yfov(), p.aspect_ratio()),
+        gltf::camera::Projection::Orthographic(o) => {
             warnings.push(format!(
                 "{element}: orthographic camera rendered as a 45° perspective"
             ));
-            45f32.to_radians()
+            (45f32.to_radians(), Some(o.xmag() / o.ymag()))
         }
+    };
+    let aspect = match aspect {
+        Some(a) if a.is_finite() && (1e-3..=1e3).contains(&a) => Some(a),
+        Some(a) => {
+            return Err(ctx.err(
+                &element,
+                format!("aspectRatio {a} must be a positive, finite width/height"),
+            ));
+        }
+        None => None,
     };
     if !(yfov.is_finite() && yfov > 1e-4 && yfov < std::f32::consts::PI - 1e-4) {
         return Err(ctx.err(&element, format!("yfov {yfov} must be in (0, π)")));
@@ -597,5 +804,6 @@ fn read_camera(
         up: right.cross(forward),
         right,
         yfov,
+        aspect,
     })
 }

@@ -20,11 +20,11 @@ use glam::Vec3;
 /// An error in a scene file; the message names the file, the element and the value.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("{file}: cannot read the file: {source}")]
+    #[error("{file}: cannot read the file: {reason}")]
     Io {
         file: String,
-        #[source]
-        source: std::io::Error,
+        /// The OS error, kept out of the error chain so it is printed once.
+        reason: std::io::Error,
     },
     #[error("{file}: {element}: {message}")]
     Invalid {
@@ -56,6 +56,11 @@ pub struct Material {
 #[derive(Clone, Debug, PartialEq)]
 pub enum PunctualKind {
     Point,
+    /// A distant light (glTF "directional", Blender's Sun): parallel light travelling
+    /// along `direction`.
+    Directional {
+        direction: Vec3,
+    },
     /// Cone about `direction`, angles in radians (glTF's smooth falloff between them).
     Spot {
         direction: Vec3,
@@ -69,7 +74,9 @@ pub struct PunctualLight {
     pub name: String,
     pub position: Vec3,
     pub kind: PunctualKind,
-    /// Radiant intensity per steradian, in the same units as emissive radiance.
+    /// Point and spot: intensity (luminance Y in candela, lm/sr); directional: irradiance
+    /// on a surface facing the light (Y in lux, lm/m²). Emissive radiance is in nits
+    /// (cd/m²): glTF's photometric units, one consistent scale.
     pub intensity: Spectrum,
 }
 
@@ -83,6 +90,8 @@ pub struct Camera {
     pub right: Vec3,
     /// Full vertical field of view in radians.
     pub yfov: f32,
+    /// Width / height the camera was made for (glTF `aspectRatio`), if it says.
+    pub aspect: Option<f32>,
 }
 
 impl Camera {
@@ -97,6 +106,7 @@ impl Camera {
             up,
             right,
             yfov,
+            aspect: None,
         }
     }
 }
@@ -111,12 +121,23 @@ pub struct Scene {
     pub triangle_material: Vec<u32>,
     pub materials: Vec<Material>,
     pub lights: Vec<PunctualLight>,
+    /// Radiance of a uniform sky around the scene (seen where rays escape), if any: what a
+    /// file with no light at all is lit by.
+    pub environment: Option<Spectrum>,
     pub camera: Camera,
     /// Things that were approximated or skipped, for the user to see.
     pub warnings: Vec<String>,
 }
 
 impl Scene {
+    /// An image size for this scene's camera: `height` rows and the camera's aspect ratio
+    /// (square when the camera does not say).
+    pub fn image_size(&self, height: u32) -> (u32, u32) {
+        let aspect = self.camera.aspect.unwrap_or(1.0);
+        let width = (height as f32 * aspect).round().clamp(1.0, 16_384.0) as u32;
+        (width, height)
+    }
+
     /// Axis-aligned bounds of the geometry.
     pub fn bounds(&self) -> (Vec3, Vec3) {
         let mut lo = Vec3::splat(f32::INFINITY);
@@ -176,10 +197,48 @@ pub fn load_builtin(name: &str) -> Result<Scene, SceneError> {
 }
 
 /// Loads a scene file, or a built-in scene when `spec` names one and no such file exists.
+/// A name that is neither gets the closest built-in names suggested.
 pub fn load_any(spec: &str) -> Result<Scene, SceneError> {
     let path = std::path::Path::new(spec);
-    if !path.exists() && BUILTIN.iter().any(|(n, _)| *n == spec) {
-        return load_builtin(spec);
+    if !path.exists() {
+        if builtin(spec).is_some() {
+            return load_builtin(spec);
+        }
+        let names: Vec<&str> = BUILTIN.iter().map(|(n, _)| *n).collect();
+        let close: Vec<&str> = names
+            .iter()
+            .copied()
+            .filter(|n| n.contains(spec) || spec.contains(n) || edit_distance(n, spec) <= 3)
+            .collect();
+        let hint = if close.is_empty() {
+            String::new()
+        } else {
+            format!("did you mean '{}'? ", close.join("' or '"))
+        };
+        return Err(SceneError::Invalid {
+            file: spec.to_string(),
+            element: "file".to_string(),
+            message: format!(
+                "no such file, and no built-in scene of that name ({hint}built in: {}; a scene file is .gltf or .glb)",
+                names.join(", ")
+            ),
+        });
     }
     load(path)
+}
+
+/// Levenshtein distance, for "did you mean".
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let cur = row[j + 1];
+            row[j + 1] = (prev + usize::from(ca != *cb)).min(row[j] + 1).min(cur + 1);
+            prev = cur;
+        }
+    }
+    row[b.len()]
 }

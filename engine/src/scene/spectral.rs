@@ -40,6 +40,8 @@ pub struct SpectralScene {
     pub tris: Vec<TriData>,
     pub materials: Vec<SMaterial>,
     pub lights: LightSet,
+    /// Radiance of the uniform sky, seen by camera paths that escape (None: black).
+    pub environment: Option<Vec<f32>>,
     pub camera: super::Camera,
     pub bounds: (Vec3, Vec3),
     /// Total area of diffuse triangles (for the default gather radius).
@@ -60,11 +62,28 @@ impl SpectralScene {
             .map(|m| project_material(m, &grid))
             .collect();
         let (tris, mut lights, diffuse_area) = triangles_and_area_lights(scene, &materials, &grid);
+        let bounds = scene.bounds();
+        let sphere = bounding_sphere(bounds);
         for l in &scene.lights {
-            match punctual_light(l, &grid) {
+            match punctual_light(l, &grid, sphere) {
                 Some(light) => lights.push(light),
                 None => warnings.push(format!("light '{}' is black and is skipped", l.name)),
             }
+        }
+        let environment = scene
+            .environment
+            .as_ref()
+            .map(|e| grid.project(e, Role::Emission))
+            .filter(|e| grid.to_xyz(e)[1] > 0.0);
+        if let Some(e) = &environment {
+            let (center, radius) = sphere;
+            let y = grid.to_xyz(e)[1];
+            let pi = std::f64::consts::PI;
+            lights.push(Light {
+                kind: LightKind::Environment { center, radius },
+                spectrum: e.clone(),
+                power: (y * 4.0 * pi * pi * (radius as f64).powi(2)) as f32,
+            });
         }
         let has_specular = materials
             .iter()
@@ -82,11 +101,12 @@ impl SpectralScene {
             name: scene.name.clone(),
             accel: Accel::new(&scene.triangles),
             lights: LightSet::new(lights, &tris),
+            environment,
             grid,
             tris,
             materials,
             camera: scene.camera,
-            bounds: scene.bounds(),
+            bounds,
             diffuse_area,
             has_specular,
             has_dispersion,
@@ -197,8 +217,21 @@ fn triangles_and_area_lights(
     (tris, lights, diffuse_area)
 }
 
-/// A point or spot light on `grid`; None when it is black.
-fn punctual_light(l: &PunctualLight, grid: &BinGrid) -> Option<Light> {
+/// A sphere around the bounds, a little larger so that photons from a distant light or
+/// the sky start outside every surface.
+fn bounding_sphere((lo, hi): (Vec3, Vec3)) -> (Vec3, f32) {
+    let center = 0.5 * (lo + hi);
+    let radius = (0.5 * (hi - lo).length()).max(1e-3) * 1.01;
+    (center, radius)
+}
+
+/// A point, spot or distant light on `grid`; None when it is black. A distant light's
+/// photons start on a disc over the bounding sphere `(center, radius)`.
+fn punctual_light(
+    l: &PunctualLight,
+    grid: &BinGrid,
+    (center, radius): (Vec3, f32),
+) -> Option<Light> {
     let spectrum = grid.project(&l.intensity, Role::Emission);
     let y = grid.to_xyz(&spectrum)[1];
     let (kind, solid_angle) = match l.kind {
@@ -220,6 +253,15 @@ fn punctual_light(l: &PunctualLight, grid: &BinGrid) -> Option<Light> {
                 omc_inner: one_minus_cos(inner.min(outer)),
             },
             2.0 * std::f64::consts::PI * one_minus_cos(outer) as f64,
+        ),
+        // Irradiance over the disc's area: the power that enters the bounding sphere.
+        PunctualKind::Directional { direction } => (
+            LightKind::Distant {
+                dir: direction,
+                center,
+                radius,
+            },
+            std::f64::consts::PI * (radius as f64).powi(2),
         ),
     };
     (y > 0.0).then_some(Light {
