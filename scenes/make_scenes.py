@@ -257,10 +257,12 @@ def prism(path):
         "baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0.0, "roughnessFactor": 0.0},
         "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
                        "KHR_materials_ior": {"ior": 1.78472},
-                       "KHR_materials_dispersion": {"dispersion": round(20 / 25.68, 5)}},
+                       "KHR_materials_dispersion": {"dispersion": round(20 / 25.68, 5)},
+                       # Dispersion applies to volumes: the prism is a solid 0.15 m across.
+                       "KHR_materials_volume": {"thicknessFactor": 0.15}},
         "extras": {"prismap": {"glass": "N-SF11"}}})
     g.used |= {"KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_dispersion",
-               "KHR_materials_emissive_strength"}
+               "KHR_materials_volume", "KHR_materials_emissive_strength"}
     fill = g.material({"name": "dim ceiling panel", "pbrMetallicRoughness": {
         "baseColorFactor": [0.8, 0.8, 0.8, 1], "metallicFactor": 0.0, "roughnessFactor": 1.0},
         "emissiveFactor": [1, 1, 1],

@@ -56,10 +56,11 @@ fn passes(app: &ViewerApp) -> u64 {
 fn switching_storage_restarts_and_changes_the_memory_readout() {
     let mut h = harness("cornell-box");
     wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    h.step();
+    // The snapshot the frame just drew (passes keep arriving; each stores other photons).
     let full = h.state().snapshot.clone().unwrap();
     assert_eq!(full.bytes_per_photon, 17.0 + 4.0 * 20.0);
     let full_text = format_bytes(full.memory.photon_maps as f64);
-    h.step();
     assert!(
         h.query_all_by_label(&full_text).count() >= 1,
         "the readout shows {full_text}"
@@ -77,13 +78,13 @@ fn switching_storage_restarts_and_changes_the_memory_readout() {
             .as_ref()
             .is_some_and(|s| s.bytes_per_photon == 29.0)
     });
+    h.step();
     let compact = h.state().snapshot.clone().unwrap();
     assert!(
         compact.memory.photon_maps * 3 < full.memory.photon_maps,
         "compact uses far less"
     );
     let compact_text = format_bytes(compact.memory.photon_maps as f64);
-    h.step();
     assert!(
         h.query_all_by_label(&compact_text).count() >= 1,
         "the readout shows {compact_text}"

@@ -203,6 +203,8 @@ impl ViewerApp {
         match source.load() {
             Ok(s) => {
                 self.orbit = Orbit::new(&s);
+                // The image takes the new camera's shape, at the same height.
+                (self.settings.width, self.settings.height) = s.image_size(self.settings.height);
                 self.scene = Arc::new(s);
                 self.source = source;
                 self.probe = None;
@@ -212,6 +214,11 @@ impl ViewerApp {
             }
             Err(e) => self.status = e.to_string(),
         }
+    }
+
+    /// An image size of `height` rows in the scene camera's shape.
+    pub fn scene_image_size(&self, height: u32) -> (u32, u32) {
+        self.scene.image_size(height)
     }
 
     /// Stop refining after `passes` passes (None: refine until paused).

@@ -7,8 +7,8 @@ use super::{SceneSource, ToneMap, ViewerApp};
 use crate::photon::Storage;
 use crate::spectral::color::{SRGB_TO_XYZ, XYZ_TO_SRGB, dominant_wavelength, mul3, srgb8};
 
-/// The paper's bin counts.
-const SIZES: [u32; 5] = [128, 256, 384, 512, 768];
+/// Image heights offered; the width follows the scene camera's aspect ratio.
+const HEIGHTS: [u32; 5] = [128, 256, 384, 512, 768];
 
 pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
     egui::Panel::left("controls")
@@ -114,13 +114,11 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     egui::ComboBox::from_label("Resolution")
                         .selected_text(format!("{}×{}", app.settings.width, app.settings.height))
                         .show_ui(ui, |ui| {
-                            for s in SIZES {
-                                if ui
-                                    .selectable_label(app.settings.width == s, format!("{s}×{s}"))
-                                    .clicked()
-                                {
-                                    app.settings.width = s;
-                                    app.settings.height = s;
+                            for h in HEIGHTS {
+                                let (w, h) = app.scene_image_size(h);
+                                let here = (app.settings.width, app.settings.height) == (w, h);
+                                if ui.selectable_label(here, format!("{w}×{h}")).clicked() {
+                                    (app.settings.width, app.settings.height) = (w, h);
                                     restart = true;
                                 }
                             }

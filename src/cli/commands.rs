@@ -118,18 +118,19 @@ pub fn view(args: ViewArgs) -> Result<()> {
     if args.after_passes == 0 {
         bail!("--after-passes 0: at least one pass is needed");
     }
+    // Fail early with the loader's message rather than inside the window.
+    let loaded = scene::load_any(&args.scene)?;
+    let (width, height) = args.size.unwrap_or_else(|| loaded.image_size(256));
     let settings = RenderSettings {
         bins: args.bins,
         storage: args.storage,
         photons_per_pass: args.photons,
-        width: args.size.0,
-        height: args.size.1,
+        width,
+        height,
         ..RenderSettings::interactive()
     };
     settings.validate()?;
     let source = if Path::new(&args.scene).exists() || scene::builtin(&args.scene).is_none() {
-        // Fail early with the loader's message rather than inside the window.
-        scene::load(Path::new(&args.scene))?;
         app::SceneSource::File(PathBuf::from(&args.scene))
     } else {
         app::SceneSource::Builtin(args.scene.clone())

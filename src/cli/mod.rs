@@ -151,8 +151,9 @@ pub struct ViewArgs {
     pub storage: Storage,
     #[arg(long, default_value_t = RenderSettings::interactive().photons_per_pass)]
     pub photons: usize,
-    #[arg(long, default_value = "256x256", value_parser = parse_size, allow_hyphen_values = true)]
-    pub size: (u32, u32),
+    /// Image size WxH (default: 256 rows in the scene camera's shape).
+    #[arg(long, value_parser = parse_size, allow_hyphen_values = true)]
+    pub size: Option<(u32, u32)>,
     /// Save a screenshot of the whole window here after --after-passes passes, then exit.
     #[arg(long)]
     pub screenshot: Option<PathBuf>,

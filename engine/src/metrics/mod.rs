@@ -141,6 +141,51 @@ pub fn de2000_stats(a: &Image, b: &Image, exposure: f32) -> Result<(f64, f64), S
     Ok((mean, p95))
 }
 
+/// The fraction of pixels brighter (in luminance) than `factor` times the median of their
+/// 8 neighbours: isolated bright speckles, the signature of a gather radius too small for
+/// the photon density. Pixels below 1e-3 of the brightest are not counted.
+pub fn speckle_fraction(image: &Image, factor: f32) -> f64 {
+    let (w, h) = (image.width as i64, image.height as i64);
+    if w < 3 || h < 3 {
+        return 0.0;
+    }
+    let y: Vec<f32> = image
+        .pixels
+        .iter()
+        .map(|p| {
+            let v = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+            if v.is_finite() { v } else { 0.0 }
+        })
+        .collect();
+    let floor = 1e-3 * y.iter().cloned().fold(0.0f32, f32::max);
+    let at = |x: i64, yy: i64| y[(yy.clamp(0, h - 1) * w + x.clamp(0, w - 1)) as usize];
+    let mut speckles = 0usize;
+    for py in 0..h {
+        for px in 0..w {
+            let v = at(px, py);
+            if v <= floor {
+                continue;
+            }
+            let mut n = [0f32; 8];
+            let mut k = 0;
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if dx != 0 || dy != 0 {
+                        n[k] = at(px + dx, py + dy);
+                        k += 1;
+                    }
+                }
+            }
+            n.sort_by(f32::total_cmp);
+            let median = 0.5 * (n[3] + n[4]);
+            if v > factor * median {
+                speckles += 1;
+            }
+        }
+    }
+    speckles as f64 / (w * h) as f64
+}
+
 /// Peak resident memory of this process (Linux `VmHWM`), if known.
 pub fn peak_rss_bytes() -> Option<u64> {
     proc_kib("/proc/self/status", "VmHWM:").map(|k| k * 1024)
@@ -217,6 +262,27 @@ mod tests {
         };
         assert_eq!(psnr(&img(0.5), &wide, 1.0), Err(SizeMismatch(1, 1, 2, 1)));
         assert!(de2000_stats(&wide, &img(0.5), 1.0).is_err());
+    }
+
+    #[test]
+    fn speckles_are_counted_and_edges_are_not() {
+        let mut img = Image {
+            width: 10,
+            height: 10,
+            pixels: vec![[0.1; 3]; 100],
+        };
+        assert_eq!(speckle_fraction(&img, 10.0), 0.0);
+        // A bright half-plane is an edge, not a speckle.
+        for y in 0..10 {
+            for x in 5..10 {
+                img.pixels[y * 10 + x] = [5.0; 3];
+            }
+        }
+        assert_eq!(speckle_fraction(&img, 10.0), 0.0);
+        // Two isolated bright pixels on the dark side are.
+        img.pixels[22] = [50.0; 3];
+        img.pixels[71] = [50.0; 3];
+        assert_eq!(speckle_fraction(&img, 10.0), 0.02);
     }
 
     #[test]

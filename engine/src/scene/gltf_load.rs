@@ -622,6 +622,11 @@ fn read_material(
                     format!("{dispersion} must be finite and ≥ 0"),
                 ));
             }
+            if dispersion > 0.0 && m.volume().is_none() {
+                warnings.push(format!(
+                    "{element} '{name}': KHR_materials_dispersion without KHR_materials_volume (glTF then means a thin-walled surface, where dispersion has no effect); rendered as a solid dispersive glass"
+                ));
+            }
             if dispersion > 0.0 {
                 // glTF: V_d = 20 / dispersion.
                 IorModel::abbe(n, 20.0 / dispersion)

@@ -1,0 +1,123 @@
+"""Builds test scenes with Blender (as a Python module) and exports them with Blender's
+own glTF exporter, the one artists use. Not run by CI; the exported files are committed.
+
+    python3.11 -m venv /tmp/bpy && /tmp/bpy/bin/pip install bpy
+    /tmp/bpy/bin/python scenes/blender/make_blender_fixtures.py
+
+Writes, beside this script:
+- default-lights-on.glb   Blender's startup scene (cube, 1000 W point light, 16:9 camera)
+- default-lights-off.glb  the same exported without lights (glTF viewers light it anyway)
+- sun.glb                 the cube on a ground plane under a Sun (directional light)
+- spotlit-prism.glb       10 m stage: a 10° spot through an N-SF11 prism (custom property
+                          prismap = {"glass": "N-SF11"}), Suzanne, a dim emissive panel
+"""
+import math
+import os
+
+import bpy
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def startup():
+    bpy.ops.wm.read_factory_settings(use_empty=False)
+
+
+def export(name, lights=True):
+    bpy.ops.export_scene.gltf(
+        filepath=os.path.join(HERE, name),
+        export_format="GLB",
+        export_lights=lights,
+        export_cameras=True,
+        export_extras=True,
+        export_apply=True,
+        export_yup=True,
+    )
+    print("wrote", name)
+
+
+def material(name, rgb, roughness=0.8):
+    m = bpy.data.materials.new(name)
+    m.use_nodes = True
+    b = m.node_tree.nodes["Principled BSDF"]
+    b.inputs["Base Color"].default_value = (*rgb, 1.0)
+    b.inputs["Roughness"].default_value = roughness
+    return m
+
+
+def default_scenes():
+    startup()
+    export("default-lights-on.glb", lights=True)
+    export("default-lights-off.glb", lights=False)
+
+
+def sun_scene():
+    startup()
+    bpy.data.objects.remove(bpy.data.objects["Light"])
+    bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, -1))
+    bpy.context.object.data.materials.append(material("ground", (0.5, 0.5, 0.5)))
+    sun = bpy.data.lights.new("Sun", type="SUN")
+    sun.energy = 3.0  # W/m²: exported as lux
+    obj = bpy.data.objects.new("Sun", sun)
+    obj.rotation_euler = (math.radians(40), math.radians(20), math.radians(30))
+    bpy.context.collection.objects.link(obj)
+    export("sun.glb")
+
+
+def spotlit_prism():
+    startup()
+    for n in ("Cube", "Light"):
+        bpy.data.objects.remove(bpy.data.objects[n])
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 1920, 1080
+    # Stage: 10 m floor and a back wall.
+    bpy.ops.mesh.primitive_plane_add(size=10, location=(0, 0, 0))
+    bpy.context.object.data.materials.append(material("floor", (0.8, 0.8, 0.8)))
+    bpy.ops.mesh.primitive_plane_add(size=10, location=(0, 5, 5), rotation=(math.radians(90), 0, 0))
+    bpy.context.object.data.materials.append(material("wall", (0.5, 0.5, 0.5)))
+    # The prism: a 3-sided cylinder, 0.6 m across, 1 m tall.
+    bpy.ops.mesh.primitive_cylinder_add(vertices=3, radius=0.35, depth=1.0, location=(0, 0, 0.5))
+    prism = bpy.context.object
+    prism.name = "Prism"
+    glass = material("N-SF11 glass", (1, 1, 1), roughness=0.0)
+    bsdf = glass.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Transmission Weight"].default_value = 1.0
+    bsdf.inputs["IOR"].default_value = 1.78
+    glass["prismap"] = {"glass": "N-SF11"}  # exported with "Custom Properties" (export_extras)
+    prism.data.materials.append(glass)
+    # Suzanne, smooth-shaded, beside it.
+    bpy.ops.mesh.primitive_monkey_add(size=0.8, location=(-1.6, 0.6, 0.45))
+    bpy.ops.object.shade_smooth()
+    bpy.context.object.data.materials.append(material("suzanne", (0.7, 0.3, 0.2)))
+    # A 10° spot aimed through the prism at the floor.
+    spot = bpy.data.lights.new("Spot", type="SPOT")
+    spot.energy = 2000.0
+    spot.spot_size = math.radians(10.0)
+    spot.spot_blend = 0.15
+    obj = bpy.data.objects.new("Spot", spot)
+    obj.location = (2.5, -1.0, 1.4)
+    direction = (-2.5, 1.0, -0.9)
+    obj.rotation_euler = direction_to_euler(direction)
+    bpy.context.collection.objects.link(obj)
+    # A dim emissive panel overhead.
+    bpy.ops.mesh.primitive_plane_add(size=2, location=(0, 0, 4), rotation=(math.radians(180), 0, 0))
+    panel = material("dim panel", (0.8, 0.8, 0.8))
+    b = panel.node_tree.nodes["Principled BSDF"]
+    b.inputs["Emission Color"].default_value = (1, 1, 1, 1)
+    b.inputs["Emission Strength"].default_value = 0.5
+    bpy.context.object.data.materials.append(panel)
+    cam = bpy.data.objects["Camera"]
+    cam.location = (0.5, -6.0, 3.0)
+    cam.rotation_euler = direction_to_euler((-0.5, 6.0, -2.6))
+    export("spotlit-prism.glb")
+
+
+def direction_to_euler(d):
+    from mathutils import Vector
+    return Vector(d).to_track_quat("-Z", "Y").to_euler()
+
+
+if __name__ == "__main__":
+    default_scenes()
+    sun_scene()
+    spotlit_prism()
