@@ -29,6 +29,8 @@ pub struct IrradianceCache {
     values: Vec<f32>,
     /// Farthest a lookup searches for a point on its surface.
     r_lookup: f32,
+    /// First radius a lookup searches (most find their point within it).
+    r_near: f32,
 }
 
 impl IrradianceCache {
@@ -81,6 +83,10 @@ impl IrradianceCache {
             normals.push(*normal);
             values.extend_from_slice(value);
         }
+        // Points are about √every photon spacings apart; the typical k-nearest radius
+        // spans √k spacings, so a small multiple of r_start/√k·√every finds the nearest.
+        let spacing =
+            kernel.r_start / (kernel.k.max(1) as f32).sqrt() * (every.max(1) as f32).sqrt();
         Self {
             positions,
             normals,
@@ -89,6 +95,7 @@ impl IrradianceCache {
             stride,
             values,
             r_lookup,
+            r_near: (3.0 * spacing).min(r_lookup),
         }
     }
 
@@ -122,8 +129,18 @@ impl IrradianceCache {
             h * h <= (1.0 / 64.0) * d.length_squared() + 1e-12
                 && oct_within(self.normals[i], n, super::map::MIN_NORMAL_COS)
         };
-        let r2 = self.r_lookup * self.r_lookup;
-        kdtree::k_nearest_within(&self.positions, &self.axes, p, 1, r2, accept, found);
+        for r in [
+            self.r_near,
+            4.0 * self.r_near,
+            16.0 * self.r_near,
+            self.r_lookup,
+        ] {
+            let r = r.min(self.r_lookup);
+            kdtree::k_nearest_within(&self.positions, &self.axes, p, 1, r * r, accept, found);
+            if !found.is_empty() {
+                break;
+            }
+        }
         let Some(&(_, i)) = found.first() else {
             return false;
         };

@@ -254,7 +254,7 @@ impl PhotonMap {
             let by_distance = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0);
             let (_, kth, _) = found.select_nth_unstable_by(kernel.k - 1, by_distance);
             kth.0
-        } else {
+        } else if r < kernel.r_max {
             let r2_max = kernel.r_max * kernel.r_max;
             kdtree::k_nearest_within(
                 &self.positions,
@@ -265,6 +265,8 @@ impl PhotonMap {
                 accept,
                 found,
             )
+        } else {
+            r * r
         };
         let r2 = r2_k * kernel.shrink * kernel.shrink;
         let inside = found.iter().filter(|f| f.0 < r2).map(|f| f.1 as usize);
