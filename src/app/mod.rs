@@ -25,6 +25,27 @@ use worker::{Command, Snapshot, Worker};
 
 pub use crate::output::ToneMap;
 
+/// What a panel asks the viewer to do. Panels push actions while they draw; the viewer
+/// applies them after the frame (the egui demo app's and rerun's habit), so drawing never
+/// changes the state it is drawing from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Action {
+    Open(SceneSource),
+    OpenDialog,
+    SetPaused(bool),
+    /// Restart refinement with the current settings and view.
+    Restart,
+    /// Back to the scene's own camera.
+    ResetView,
+    /// Save the image as "png" or "exr".
+    Save(&'static str),
+    SetProbe((u32, u32)),
+    PinProbe,
+    Unpin((u32, u32)),
+    /// Export the probe at this pixel as CSV.
+    ExportProbe((u32, u32)),
+}
+
 /// A request to save a screenshot of the window after some passes, then quit.
 #[derive(Clone, Debug)]
 pub struct Capture {
@@ -71,6 +92,8 @@ pub struct ViewerApp {
     pub settings: RenderSettings,
     pub auto_bins: bool,
     auto_reason: String,
+    /// Actions the panels asked for during this frame.
+    actions: Vec<Action>,
     pub exposure: f32,
     /// Exposure follows each new image ([`crate::output::auto_exposure`]) until the user
     /// sets one.
@@ -132,6 +155,7 @@ impl ViewerApp {
             settings,
             auto_bins: false,
             auto_reason: String::new(),
+            actions: Vec::new(),
             exposure: 1.0,
             auto_exposure: true,
             tone: ToneMap::Clamp,
@@ -439,7 +463,45 @@ impl ViewerApp {
         panels::statistics(self, ui);
         panels::probe(self, ui);
         panels::image(self, ui);
+        self.apply_actions(&ctx);
         self.drive_capture(&ctx);
+    }
+
+    /// Queues an action for the end of the frame.
+    pub fn act(&mut self, action: Action) {
+        if !self.actions.contains(&action) {
+            self.actions.push(action);
+        }
+    }
+
+    /// Applies the frame's actions in the order they were asked for.
+    fn apply_actions(&mut self, ctx: &egui::Context) {
+        for action in std::mem::take(&mut self.actions) {
+            match action {
+                Action::Open(source) => self.open(source),
+                Action::OpenDialog => self.open_dialog(ctx),
+                Action::SetPaused(p) => self.set_paused(p),
+                Action::Restart => self.restart(),
+                Action::ResetView => {
+                    self.orbit = Orbit::new(&self.scene);
+                    self.restart();
+                }
+                Action::Save(ext) => {
+                    if let Err(e) = self.save(ext) {
+                        self.status = format!("save failed: {e}");
+                    }
+                }
+                Action::SetProbe(p) => self.set_probe(p),
+                Action::PinProbe => self.pin_probe(),
+                Action::Unpin(p) => self.unpin(p),
+                Action::ExportProbe(p) => {
+                    self.status = match panels::export_probe_csv(self, p) {
+                        Ok(path) => format!("saved {}", path.display()),
+                        Err(e) => format!("CSV export failed: {e}"),
+                    }
+                }
+            }
+        }
     }
 
     pub fn memory_history(&self) -> &VecDeque<MemorySample> {

@@ -3,7 +3,7 @@
 use egui::{Color32, RichText};
 use egui_plot::{Line, Plot, PlotPoints, Polygon};
 
-use super::{SceneSource, ToneMap, ViewerApp};
+use super::{Action, SceneSource, ToneMap, ViewerApp};
 use crate::photon::Storage;
 use crate::spectral::color::{SRGB_TO_XYZ, XYZ_TO_SRGB, dominant_wavelength, mul3, srgb8};
 
@@ -46,13 +46,12 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         open = Some(SceneSource::File(app.path_input.trim().into()));
                     }
                     if ui.button("Browse…").clicked() {
-                        let ctx = ui.ctx().clone();
-                        app.open_dialog(&ctx);
+                        app.act(Action::OpenDialog);
                     }
                 });
                 ui.small("…or drop a .gltf/.glb on the window");
                 if let Some(s) = open {
-                    app.open(s);
+                    app.act(Action::Open(s));
                 }
                 ui.separator();
 
@@ -145,28 +144,25 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 ui.horizontal(|ui| {
                     let label = if app.paused { "Resume" } else { "Pause" };
                     if ui.button(label).clicked() {
-                        app.set_paused(!app.paused);
+                        app.act(Action::SetPaused(!app.paused));
                     }
                     if ui.button("Restart").clicked() {
                         restart = true;
                     }
                     if ui.button("Reset view").clicked() {
-                        app.orbit = super::Orbit::new(&app.scene);
-                        restart = true;
+                        app.act(Action::ResetView);
                     }
                 });
                 ui.horizontal(|ui| {
                     for ext in ["png", "exr"] {
-                        if ui.button(format!("Save {}", ext.to_uppercase())).clicked()
-                            && let Err(e) = app.save(ext)
-                        {
-                            app.status = format!("save failed: {e}");
+                        if ui.button(format!("Save {}", ext.to_uppercase())).clicked() {
+                            app.act(Action::Save(ext));
                         }
                     }
                 });
                 ui.small(format!("into {}/", app.save_dir.display()));
                 if restart {
-                    app.restart();
+                    app.act(Action::Restart);
                 }
                 if !app.status.is_empty() {
                     ui.separator();
@@ -409,16 +405,13 @@ pub fn probe(app: &mut ViewerApp, ui: &mut egui::Ui) {
                             );
                             if app.pinned.contains(&(x, y)) {
                                 if ui.small_button("unpin").clicked() {
-                                    app.unpin((x, y));
+                                    app.act(Action::Unpin((x, y)));
                                 }
                             } else if ui.small_button("pin").clicked() {
-                                app.pin_probe();
+                                app.act(Action::PinProbe);
                             }
                             if ui.small_button("CSV").clicked() {
-                                match export_csv(app, &snap, p) {
-                                    Ok(path) => app.status = format!("saved {}", path.display()),
-                                    Err(e) => app.status = format!("CSV export failed: {e}"),
-                                }
+                                app.act(Action::ExportProbe((x, y)));
                             }
                         });
                         ui.small(format!("XYZ {:.4} {:.4} {:.4}", xyz[0], xyz[1], xyz[2]));
@@ -492,6 +485,17 @@ pub fn probe(app: &mut ViewerApp, ui: &mut egui::Ui) {
         });
 }
 
+/// Writes the spectrum of the probe at `pixel` (from the newest snapshot) as CSV.
+pub fn export_probe_csv(app: &ViewerApp, pixel: (u32, u32)) -> Result<std::path::PathBuf, String> {
+    let snap = app.snapshot.as_ref().ok_or("no image yet")?;
+    let p = snap
+        .probes
+        .iter()
+        .find(|p| (p.x, p.y) == pixel)
+        .ok_or_else(|| format!("no probe at ({}, {})", pixel.0, pixel.1))?;
+    export_csv(app, snap, p)
+}
+
 fn export_csv(
     app: &ViewerApp,
     snap: &super::Snapshot,
@@ -546,14 +550,14 @@ pub fn image(app: &mut ViewerApp, ui: &mut egui::Ui) {
         if resp.clicked()
             && let Some(px) = resp.interact_pointer_pos().and_then(to_pixel)
         {
-            app.set_probe(px);
+            app.act(Action::SetProbe(px));
         }
         if resp.hovered()
             && ui.input(|i| i.modifiers.alt)
             && let Some(px) = resp.hover_pos().and_then(to_pixel)
             && app.probe != Some(px)
         {
-            app.set_probe(px);
+            app.act(Action::SetProbe(px));
         }
         if resp.dragged_by(egui::PointerButton::Primary) && !ui.input(|i| i.modifiers.shift) {
             let d = resp.drag_delta();
@@ -588,7 +592,7 @@ pub fn image(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 .circle_stroke(p, 5.0, egui::Stroke::new(1.5, colour));
         }
         if restart {
-            app.restart();
+            app.act(Action::Restart);
         }
     });
 }
