@@ -593,57 +593,7 @@ fn read_material(
             reflectance: Spectrum::Reflectance(base_rgb),
         }
     } else if transmission > 0.0 || extras.glass.is_some() {
-        if transmission > 0.0 && transmission < 1.0 {
-            warnings.push(format!(
-                "{element} '{name}': transmission {transmission} rendered as clear glass"
-            ));
-        }
-        let ior = if let Some(glass) = &extras.glass {
-            IorModel::glass(glass)
-                .map_err(|e| ctx.err(format!("{element}.extras.prismap.glass"), e.to_string()))?
-        } else {
-            let n = m.ior().unwrap_or(1.5) as f64;
-            let dispersion = m
-                .extension_value("KHR_materials_dispersion")
-                .and_then(|v| v.get("dispersion"))
-                .map(|v| {
-                    v.as_f64().ok_or_else(|| {
-                        ctx.err(
-                            format!("{element}.KHR_materials_dispersion.dispersion"),
-                            format!("{v} is not a number"),
-                        )
-                    })
-                })
-                .transpose()?
-                .unwrap_or(0.0);
-            if !(dispersion.is_finite() && dispersion >= 0.0) {
-                return Err(ctx.err(
-                    format!("{element}.KHR_materials_dispersion.dispersion"),
-                    format!("{dispersion} must be finite and ≥ 0"),
-                ));
-            }
-            if dispersion > 0.0 && m.volume().is_none() {
-                warnings.push(format!(
-                    "{element} '{name}': KHR_materials_dispersion without KHR_materials_volume (glTF then means a thin-walled surface, where dispersion has no effect); rendered as a solid dispersive glass"
-                ));
-            }
-            if dispersion > 0.0 {
-                // glTF: V_d = 20 / dispersion.
-                IorModel::abbe(n, 20.0 / dispersion)
-            } else {
-                IorModel::constant(n)
-            }
-            .map_err(|e| ctx.err(format!("{element}.ior"), e.to_string()))?
-        };
-        ior.validate(360.0, 830.0)
-            .map_err(|e| ctx.err(&element, e.to_string()))?;
-        if let Some(v) = m.volume()
-            && (v.attenuation_distance().is_finite() || v.attenuation_color() != [1.0; 3])
-        {
-            warnings.push(format!(
-                "{element} '{name}': KHR_materials_volume attenuation is not rendered (clear glass)"
-            ));
-        }
+        let ior = read_glass(m, &extras, transmission, ctx, (&element, &name), warnings)?;
         MaterialKind::Dielectric { ior }
     } else if pbr.metallic_factor() >= 0.99 && pbr.roughness_factor() <= 0.05 {
         MaterialKind::Mirror {
@@ -661,6 +611,88 @@ fn read_material(
             reflectance: Spectrum::Reflectance(base_rgb),
         }
     };
+    let emission = read_emission(m, &extras, ctx, (&element, &name), warnings)?;
+    Ok(Material {
+        name,
+        kind,
+        emission,
+    })
+}
+
+/// The index of refraction of a transmissive material: a named Sellmeier glass from the
+/// extras, else `KHR_materials_ior` with `KHR_materials_dispersion` (Abbe form).
+fn read_glass(
+    m: &gltf::Material,
+    extras: &PrismapExtras,
+    transmission: f32,
+    ctx: &Ctx,
+    (element, name): (&str, &str),
+    warnings: &mut Vec<String>,
+) -> Result<IorModel, SceneError> {
+    let element = element.to_string();
+    if transmission > 0.0 && transmission < 1.0 {
+        warnings.push(format!(
+            "{element} '{name}': transmission {transmission} rendered as clear glass"
+        ));
+    }
+    let ior = if let Some(glass) = &extras.glass {
+        IorModel::glass(glass)
+            .map_err(|e| ctx.err(format!("{element}.extras.prismap.glass"), e.to_string()))?
+    } else {
+        let n = m.ior().unwrap_or(1.5) as f64;
+        let dispersion = m
+            .extension_value("KHR_materials_dispersion")
+            .and_then(|v| v.get("dispersion"))
+            .map(|v| {
+                v.as_f64().ok_or_else(|| {
+                    ctx.err(
+                        format!("{element}.KHR_materials_dispersion.dispersion"),
+                        format!("{v} is not a number"),
+                    )
+                })
+            })
+            .transpose()?
+            .unwrap_or(0.0);
+        if !(dispersion.is_finite() && dispersion >= 0.0) {
+            return Err(ctx.err(
+                format!("{element}.KHR_materials_dispersion.dispersion"),
+                format!("{dispersion} must be finite and ≥ 0"),
+            ));
+        }
+        if dispersion > 0.0 && m.volume().is_none() {
+            warnings.push(format!(
+                "{element} '{name}': KHR_materials_dispersion without KHR_materials_volume (glTF then means a thin-walled surface, where dispersion has no effect); rendered as a solid dispersive glass"
+            ));
+        }
+        if dispersion > 0.0 {
+            // glTF: V_d = 20 / dispersion.
+            IorModel::abbe(n, 20.0 / dispersion)
+        } else {
+            IorModel::constant(n)
+        }
+        .map_err(|e| ctx.err(format!("{element}.ior"), e.to_string()))?
+    };
+    ior.validate(360.0, 830.0)
+        .map_err(|e| ctx.err(&element, e.to_string()))?;
+    if let Some(v) = m.volume()
+        && (v.attenuation_distance().is_finite() || v.attenuation_color() != [1.0; 3])
+    {
+        warnings.push(format!(
+            "{element} '{name}': KHR_materials_volume attenuation is not rendered (clear glass)"
+        ));
+    }
+    Ok(ior)
+}
+
+/// The emission of a material: `emissiveFactor × KHR_materials_emissive_strength`, shaped
+/// by the extras' spectrum if any.
+fn read_emission(
+    m: &gltf::Material,
+    extras: &PrismapExtras,
+    ctx: &Ctx,
+    (element, name): (&str, &str),
+    warnings: &mut Vec<String>,
+) -> Result<Option<Spectrum>, SceneError> {
     let strength = m.emissive_strength().unwrap_or(1.0);
     if !(strength.is_finite() && strength >= 0.0) {
         return Err(ctx.err(
@@ -685,11 +717,7 @@ fn read_material(
         }
         None
     };
-    Ok(Material {
-        name,
-        kind,
-        emission,
-    })
+    Ok(emission)
 }
 
 fn read_light(
