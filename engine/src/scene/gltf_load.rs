@@ -700,14 +700,14 @@ fn read_emission(
             format!("{strength} must be finite and ≥ 0"),
         ));
     }
-    let e = finite_rgb(m.emissive_factor(), ctx, &element, "emissiveFactor")?;
+    let e = finite_rgb(m.emissive_factor(), ctx, element, "emissiveFactor")?;
     let rgb = e.map(|v| v * strength as f64);
     let emission = if rgb.iter().any(|&v| v > 0.0) {
         Some(emission_spectrum(
             rgb,
             extras.emission.as_ref(),
             ctx,
-            &element,
+            element,
         )?)
     } else {
         if extras.emission.is_some() {
