@@ -351,6 +351,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
         name: "dark".into(),
         triangles: vec![[Vec3::ZERO, Vec3::X, Vec3::Y]],
         triangle_material: vec![0],
+        shading_normals: vec![],
         materials: vec![Material {
             name: "m".into(),
             kind: MaterialKind::Diffuse {

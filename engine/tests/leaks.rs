@@ -118,6 +118,8 @@ fn every_blender_fixture_loads_and_renders_with_the_camera_shape() {
         |m| matches!(&m.kind, scene::MaterialKind::Dielectric { ior } if ior.is_dispersive()),
     );
     assert!(glass.is_some(), "{:?}", s.materials);
+    // Its smooth-shaded Suzanne brought vertex normals along.
+    assert_eq!(s.shading_normals.len(), s.triangles.len());
 }
 
 #[test]

@@ -31,6 +31,29 @@ pub struct TriData {
     pub material: u32,
 }
 
+impl TriData {
+    /// Barycentric coordinates (b1, b2) of a point in the triangle's plane: p = v0 +
+    /// b1·e1 + b2·e2.
+    #[inline]
+    pub fn barycentric(&self, p: Vec3) -> (f32, f32) {
+        let d = p - self.v0;
+        let (d00, d01, d11) = (
+            self.e1.dot(self.e1),
+            self.e1.dot(self.e2),
+            self.e2.dot(self.e2),
+        );
+        let (d20, d21) = (d.dot(self.e1), d.dot(self.e2));
+        let denom = d00 * d11 - d01 * d01;
+        if !(denom.abs() > 0.0) {
+            return (0.0, 0.0);
+        }
+        (
+            (d11 * d20 - d01 * d21) / denom,
+            (d00 * d21 - d01 * d20) / denom,
+        )
+    }
+}
+
 /// Where a ray met a surface, with the normals shading needs: the one surface-hit type of
 /// the photon tracer and the gather.
 #[derive(Clone, Copy, Debug)]
@@ -42,20 +65,47 @@ pub struct SurfaceHit {
     pub nf: Vec3,
     /// Whether the ray hit the front face.
     pub front: bool,
+    /// The interpolated shading normal turned to the same side as `nf` (equal to `nf` on
+    /// flat-shaded triangles).
+    pub ns: Vec3,
     pub material: u32,
 }
 
 impl SurfaceHit {
-    /// The hit of the ray `origin + t·dir` with `tri` at distance `t`.
+    /// The hit of the ray `origin + t·dir` with `tri` at distance `t`; `shading` holds
+    /// the triangle's vertex normals, if it has them.
     #[inline]
-    pub fn new(tri: &TriData, origin: Vec3, dir: Vec3, t: f32) -> Self {
+    pub fn new(
+        tri: &TriData,
+        shading: Option<&[Vec3; 3]>,
+        origin: Vec3,
+        dir: Vec3,
+        t: f32,
+    ) -> Self {
         let n = tri.normal;
         let front = dir.dot(n) < 0.0;
+        let p = origin + dir * t;
+        let nf = if front { n } else { -n };
+        let ns = match shading {
+            Some(vn) => {
+                let (b1, b2) = tri.barycentric(p);
+                let s = (vn[0] * (1.0 - b1 - b2) + vn[1] * b1 + vn[2] * b2).normalize_or_zero();
+                // Turned to the geometric side the ray came from; a degenerate blend is flat.
+                let s = if s.dot(nf) < 0.0 { -s } else { s };
+                if s == Vec3::ZERO || !s.is_finite() {
+                    nf
+                } else {
+                    s
+                }
+            }
+            None => nf,
+        };
         Self {
-            p: origin + dir * t,
+            p,
             n,
-            nf: if front { n } else { -n },
+            nf,
             front,
+            ns,
             material: tri.material,
         }
     }

@@ -89,6 +89,39 @@ pub fn scatter_dielectric(d: Vec3, n: Vec3, eta: f32, u: f32) -> DielectricEvent
     }
 }
 
+/// [`scatter_dielectric`] with a shading normal `ns` (unit, turned to the side the ray
+/// comes from): Fresnel and the new direction follow `ns`, so a smooth-shaded glass sphere
+/// refracts as a sphere, not as facets. Where shading and geometric normals disagree (near
+/// silhouettes) and the result would leave on the wrong side of the actual surface, the
+/// geometric normal `n` (outward) is used instead, with the same random number.
+pub fn scatter_dielectric_shaded(d: Vec3, n: Vec3, ns: Vec3, eta: f32, u: f32) -> DielectricEvent {
+    let entering = d.dot(n) < 0.0;
+    if !(-d.dot(ns) > 1e-6) {
+        return scatter_dielectric(d, n, eta, u);
+    }
+    let ns_out = if entering { ns } else { -ns };
+    let ev = scatter_dielectric(d, ns_out, eta, u);
+    let nf = if entering { n } else { -n };
+    let on_its_side = if ev.transmitted {
+        ev.dir.dot(nf) < 0.0
+    } else {
+        ev.dir.dot(nf) > 0.0
+    };
+    if on_its_side {
+        ev
+    } else {
+        scatter_dielectric(d, n, eta, u)
+    }
+}
+
+/// Mirror reflection about the shading normal `ns`, or about the geometric `nf` (both
+/// facing the incoming side) when the shading one would send the ray into the surface.
+#[inline]
+pub fn reflect_shaded(d: Vec3, nf: Vec3, ns: Vec3) -> Vec3 {
+    let r = reflect(d, ns);
+    if r.dot(nf) > 0.0 { r } else { reflect(d, nf) }
+}
+
 /// Russian roulette on a reflectance: multiplies `t` by ρ, then survives with
 /// p = min(1, Σ(t·ρ)/Σt) and divides by p (unbiased; the path's weight stays near its
 /// size before the bounce). Returns false when the path is absorbed. Shared by the photon
@@ -149,6 +182,37 @@ mod tests {
             let eta_out = 1.5;
             let tir = eta_out * eta_out * th.sin() * th.sin() >= 1.0;
             assert_eq!(refract(d, n, eta_out).is_none(), tir, "{i}°");
+        }
+    }
+
+    #[test]
+    fn shading_normals_bend_rays_but_never_through_the_wrong_side() {
+        let n = Vec3::Z;
+        // Flat shading: identical to the geometric case.
+        let d = Vec3::new(0.6, 0.0, -0.8);
+        let a = scatter_dielectric(d, n, 1.5, 0.5);
+        let b = scatter_dielectric_shaded(d, n, n, 1.5, 0.5);
+        assert_eq!((a.dir, a.transmitted), (b.dir, b.transmitted));
+        // A tilted shading normal changes the refracted direction (a smooth sphere)...
+        let ns = Vec3::new(0.2, 0.0, 1.0).normalize();
+        let c = scatter_dielectric_shaded(d, n, ns, 1.5, 0.5);
+        assert!(c.transmitted && (c.dir - a.dir).length() > 1e-3);
+        // ...and whatever the normals, reflected rays stay above the surface and
+        // transmitted ones go below it.
+        for i in 0..200 {
+            let t = i as f32 / 200.0 * 1.4 - 0.7;
+            let ns = Vec3::new(t, 0.3 * t, 1.0).normalize();
+            for d in [
+                Vec3::new(0.99, 0.0, -0.14).normalize(),
+                Vec3::new(-0.3, 0.2, -0.9).normalize(),
+            ] {
+                for u in [0.01, 0.5, 0.99] {
+                    let e = scatter_dielectric_shaded(d, n, ns, 1.5, u);
+                    assert!(e.dir.is_finite());
+                    assert_eq!(e.dir.z < 0.0, e.transmitted, "{d:?} {ns:?} {u}");
+                }
+                assert!(reflect_shaded(d, n, ns).z > 0.0);
+            }
         }
     }
 

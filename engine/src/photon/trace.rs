@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use super::map::{PhotonBatch, PhotonMap};
 use super::record::Record;
-use crate::materials::{reflect, russian_roulette, scatter_dielectric};
+use crate::materials::{reflect_shaded, russian_roulette, scatter_dielectric_shaded};
 use crate::sampling::{Purpose, Rng, cosine_hemisphere};
 use crate::scene::{SpectralScene, SurfaceKind};
 use crate::spectral::spd;
@@ -166,7 +166,7 @@ fn trace_one(
             let Some(hit) = scene.intersect(path.origin, path.dir) else {
                 break;
             };
-            let (p, n, nf) = (hit.p, hit.n, hit.nf);
+            let (p, n, nf, ns) = (hit.p, hit.n, hit.nf, hit.ns);
             path.depth += 1;
             match &scene.material(&hit).kind {
                 SurfaceKind::Diffuse { reflectance } => {
@@ -186,7 +186,7 @@ fn trace_one(
                         break;
                     }
                     path.specular_seen = true;
-                    path.dir = reflect(path.dir, nf);
+                    path.dir = reflect_shaded(path.dir, nf, ns);
                     path.origin = scene.accel.offset(p, nf, path.dir);
                 }
                 SurfaceKind::Dielectric { eta, dispersive } => {
@@ -208,7 +208,7 @@ fn trace_one(
                         break;
                     }
                     let e = eta[single.unwrap_or(0)];
-                    let ev = scatter_dielectric(path.dir, n, e, rng.next_f32());
+                    let ev = scatter_dielectric_shaded(path.dir, n, ns, e, rng.next_f32());
                     path.specular_seen = true;
                     path.dir = ev.dir;
                     path.origin = scene.accel.offset(p, n, path.dir);

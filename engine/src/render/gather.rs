@@ -5,7 +5,8 @@
 
 use glam::Vec3;
 
-use crate::materials::{reflect, russian_roulette, scatter_dielectric};
+use crate::geometry::SurfaceHit;
+use crate::materials::{reflect_shaded, russian_roulette, scatter_dielectric_shaded};
 use crate::photon::{IrradianceCache, Kernel, PhotonMap};
 use crate::sampling::{Rng, cosine_hemisphere};
 use crate::scene::{SpectralScene, SurfaceKind};
@@ -100,7 +101,7 @@ impl Gather<'_> {
                 }
                 return;
             };
-            let (p, n, nf, front) = (hit.p, hit.n, hit.nf, hit.front);
+            let (p, nf, front) = (hit.p, hit.nf, hit.front);
             let mat = scene.material(&hit);
             // Emitters seen directly or through specular surfaces.
             if let (Some(e), true) = (&mat.emission, front) {
@@ -116,7 +117,7 @@ impl Gather<'_> {
                     }
                     return;
                 }
-                kind => match self.specular_bounce(kind, p, n, dir, &mut s.throughput, rng) {
+                kind => match self.specular_bounce(kind, &hit, dir, &mut s.throughput, rng) {
                     Some((o, d)) => (origin, dir) = (o, d),
                     None => return,
                 },
@@ -203,7 +204,7 @@ impl Gather<'_> {
             let Some(hit) = scene.intersect(origin, dir) else {
                 return;
             };
-            let (p, n, nf) = (hit.p, hit.n, hit.nf);
+            let (p, nf) = (hit.p, hit.nf);
             match &scene.material(&hit).kind {
                 SurfaceKind::Diffuse { reflectance } => {
                     // No cache point within the search cap means (almost surely) fewer than
@@ -220,7 +221,7 @@ impl Gather<'_> {
                     spd::scale(out, std::f32::consts::FRAC_1_PI);
                     return;
                 }
-                kind => match self.specular_bounce(kind, p, n, dir, t, rng) {
+                kind => match self.specular_bounce(kind, &hit, dir, t, rng) {
                     Some((o, d)) => (origin, dir) = (o, d),
                     None => return,
                 },
@@ -242,20 +243,19 @@ impl Gather<'_> {
     fn specular_bounce(
         &self,
         kind: &SurfaceKind,
-        p: Vec3,
-        n: Vec3,
+        hit: &SurfaceHit,
         dir: Vec3,
         t: &mut [f32],
         rng: &mut Rng,
     ) -> Option<(Vec3, Vec3)> {
-        let nf = if dir.dot(n) < 0.0 { n } else { -n };
+        let (p, n, nf, ns) = (hit.p, hit.n, hit.nf, hit.ns);
         let next = match kind {
             SurfaceKind::Diffuse { .. } => return None,
             SurfaceKind::Mirror { reflectance } => {
                 if !russian_roulette(t, reflectance, rng.next_f32()) {
                     return None;
                 }
-                let d = reflect(dir, nf);
+                let d = reflect_shaded(dir, nf, ns);
                 (self.scene.accel.offset(p, nf, d), d)
             }
             SurfaceKind::Dielectric { eta, dispersive } => {
@@ -270,7 +270,7 @@ impl Gather<'_> {
                         eta[bin]
                     }
                 };
-                let ev = scatter_dielectric(dir, n, e, rng.next_f32());
+                let ev = scatter_dielectric_shaded(dir, n, ns, e, rng.next_f32());
                 if ev.transmitted {
                     spd::scale(t, ev.eta_ratio * ev.eta_ratio);
                 }

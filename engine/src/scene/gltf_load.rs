@@ -111,6 +111,7 @@ fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
             name: "scene".to_string(),
             triangles: Vec::new(),
             triangle_material: Vec::new(),
+            shading_normals: Vec::new(),
             materials: Vec::new(),
             lights: Vec::new(),
             environment: None,
@@ -370,14 +371,40 @@ impl Walk<'_> {
                 format!("index {bad} out of range for {} vertices", positions.len()),
             ));
         }
+        // Shading normals: glTF NORMAL through the inverse transpose; a missing, zero or
+        // non-finite one falls back to the triangle's geometric normal.
+        let normals: Option<Vec<Vec3>> = reader
+            .read_normals()
+            .map(|it| it.map(Vec3::from).collect())
+            .filter(|n: &Vec<Vec3>| n.len() == positions.len());
+        let normal_matrix = glam::Mat3::from_mat4(*world).inverse().transpose();
         for tri in indices.chunks_exact(3) {
             let t = [0, 1, 2].map(|k| world.transform_point3(positions[tri[k] as usize]));
             if t.iter().any(|v| !v.is_finite()) {
                 return Err(ctx.err(&pel, "transformed vertex is not finite"));
             }
-            if triangle_normal(&t).0 == 0.0 {
+            let (twice_area, geometric) = triangle_normal(&t);
+            if twice_area == 0.0 {
                 self.degenerate += 1;
                 continue;
+            }
+            if let Some(ns) = &normals {
+                let shade = [0, 1, 2].map(|k| {
+                    let n = (normal_matrix * ns[tri[k] as usize]).normalize_or_zero();
+                    if n.is_finite() && n != Vec3::ZERO {
+                        n
+                    } else {
+                        geometric
+                    }
+                });
+                // Earlier triangles had none: give them their geometric normals.
+                while self.out.shading_normals.len() < self.out.triangles.len() {
+                    let g = triangle_normal(&self.out.triangles[self.out.shading_normals.len()]).1;
+                    self.out.shading_normals.push([g; 3]);
+                }
+                self.out.shading_normals.push(shade);
+            } else if !self.out.shading_normals.is_empty() {
+                self.out.shading_normals.push([geometric; 3]);
             }
             self.out.triangles.push(t);
             self.out.triangle_material.push(mat_index);

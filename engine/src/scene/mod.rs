@@ -119,6 +119,10 @@ pub struct Scene {
     pub triangles: Vec<[Vec3; 3]>,
     /// Material index of each triangle.
     pub triangle_material: Vec<u32>,
+    /// Per-vertex shading normals of each triangle (glTF `NORMAL`, unit, world space), in
+    /// triangle order; empty when no mesh has any (then geometric normals shade). A
+    /// triangle without them repeats its geometric normal.
+    pub shading_normals: Vec<[Vec3; 3]>,
     pub materials: Vec<Material>,
     pub lights: Vec<PunctualLight>,
     /// Radiance of a uniform sky around the scene (seen where rays escape), if any: what a

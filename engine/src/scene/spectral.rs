@@ -38,6 +38,8 @@ pub struct SpectralScene {
     pub grid: BinGrid,
     pub accel: Accel,
     pub tris: Vec<TriData>,
+    /// Vertex shading normals per triangle (empty: flat shading everywhere).
+    pub shading_normals: Vec<[Vec3; 3]>,
     pub materials: Vec<SMaterial>,
     pub lights: LightSet,
     /// Radiance of the uniform sky, seen by camera paths that escape (None: black).
@@ -104,6 +106,11 @@ impl SpectralScene {
             environment,
             grid,
             tris,
+            shading_normals: if scene.shading_normals.len() == scene.triangles.len() {
+                scene.shading_normals.clone()
+            } else {
+                Vec::new()
+            },
             materials,
             camera: scene.camera,
             bounds,
@@ -126,8 +133,10 @@ impl SpectralScene {
     #[inline]
     pub fn intersect(&self, origin: Vec3, dir: Vec3) -> Option<SurfaceHit> {
         let hit = self.accel.intersect(origin, dir, f32::INFINITY)?;
+        let i = hit.prim as usize;
         Some(SurfaceHit::new(
-            &self.tris[hit.prim as usize],
+            &self.tris[i],
+            self.shading_normals.get(i),
             origin,
             dir,
             hit.t,
