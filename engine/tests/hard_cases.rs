@@ -358,6 +358,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
                 reflectance: Spectrum::Reflectance([0.5; 3]),
             },
             emission: Some(Spectrum::Reflectance([-1.0, -1.0, -1.0])),
+            volume: None,
         }],
         lights: vec![],
         camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0),

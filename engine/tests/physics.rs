@@ -74,6 +74,7 @@ impl Builder {
             name: format!("m{m}"),
             kind,
             emission,
+            volume: None,
         });
         self.triangle_material
             .extend(std::iter::repeat_n(m, tris.len()));
@@ -549,4 +550,52 @@ fn a_smooth_shaded_glass_ball_focuses_like_a_finely_tessellated_one() {
         .abs()
         .max((flat_spread / fine_spread - 1.0).abs());
     assert!(flat_err > 0.1, "the test can tell facets apart: {flat_err}");
+}
+
+#[test]
+fn thick_coloured_glass_transmits_exp_minus_sigma_d_per_bin() {
+    // Issue #11: KHR_materials_volume. A slab of index 1 (no Fresnel, no bending) 0.3 thick
+    // whose attenuation colour is (0.9, 0.5, 0.2) after 0.1: an emitter of radiance 1 seen
+    // through it has radiance c_i^(d/D) = exp(−σ_i d) in every bin.
+    use prismap_engine::scene::Volume;
+    let (d, dist, color) = (0.3f32, 0.1f64, [0.9, 0.5, 0.2]);
+    let mut b = Builder::new();
+    b.add(
+        box_triangles(
+            Vec3::new(-3.0, -3.0, 1.0),
+            Vec3::new(3.0, 3.0, 1.0 + d),
+            false,
+        ),
+        glass(1.0),
+        None,
+    );
+    b.materials.last_mut().unwrap().volume = Some(Volume {
+        color,
+        distance: dist,
+    });
+    b.add(
+        square_facing_minus_z(Vec3::new(0.0, 0.0, 3.0), 8.0),
+        diffuse(0.0),
+        Some(Spectrum::Constant(1.0)),
+    );
+    let scene = b.scene("slab", Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 0.2));
+    for bins in [4, 16] {
+        let grid = prismap_engine::spectral::BinGrid::with_bins(bins).unwrap();
+        let c = grid.project(
+            &Spectrum::Reflectance(color),
+            prismap_engine::spectral::Role::Reflectance,
+        );
+        let mut r = RenderSession::new(&scene, settings(Storage::Full, bins, 0, 8, 2_000)).unwrap();
+        r.set_probes(&[(4, 4)]);
+        r.run_pass().unwrap();
+        let got = r.probes()[0].mean();
+        for (i, (g, ci)) in got.iter().zip(&c).enumerate() {
+            let want = (ci.clamp(1e-6, 1.0) as f64).powf(d as f64 / dist) as f32;
+            println!("{bins} bins, bin {i}: {g:.5} (exp(−σd) = {want:.5})");
+            assert!(
+                (g - want).abs() <= 1e-3 * want.max(1e-3),
+                "bin {i}: {g} vs {want}"
+            );
+        }
+    }
 }

@@ -65,6 +65,8 @@ pub struct SurfaceHit {
     pub nf: Vec3,
     /// Whether the ray hit the front face.
     pub front: bool,
+    /// Distance along the ray.
+    pub t: f32,
     /// The interpolated shading normal turned to the same side as `nf` (equal to `nf` on
     /// flat-shaded triangles).
     pub ns: Vec3,
@@ -105,6 +107,7 @@ impl SurfaceHit {
             n,
             nf,
             front,
+            t,
             ns,
             material: tri.material,
         }

@@ -122,6 +122,14 @@ pub fn reflect_shaded(d: Vec3, nf: Vec3, ns: Vec3) -> Vec3 {
     if r.dot(nf) > 0.0 { r } else { reflect(d, nf) }
 }
 
+/// Beer–Lambert: `t` *= exp(−σ·distance) per bin.
+#[inline]
+pub fn absorb(t: &mut [f32], sigma: &[f32], distance: f32) {
+    for (v, s) in t.iter_mut().zip(sigma) {
+        *v *= (-s * distance).exp();
+    }
+}
+
 /// Russian roulette on a reflectance: multiplies `t` by ρ, then survives with
 /// p = min(1, Σ(t·ρ)/Σt) and divides by p (unbiased; the path's weight stays near its
 /// size before the bounce). Returns false when the path is absorbed. Shared by the photon

@@ -168,7 +168,9 @@ fn trace_one(
             };
             let (p, n, nf, ns) = (hit.p, hit.n, hit.nf, hit.ns);
             path.depth += 1;
-            match &scene.material(&hit).kind {
+            let mat = scene.material(&hit);
+            mat.absorb_inside(&hit, &mut path.flux);
+            match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {
                     global.push(grid, p, nf, &path.flux);
                     if caustic && path.specular_seen && !path.diffuse_seen {

@@ -103,6 +103,7 @@ impl Gather<'_> {
             };
             let (p, nf, front) = (hit.p, hit.nf, hit.front);
             let mat = scene.material(&hit);
+            mat.absorb_inside(&hit, &mut s.throughput);
             // Emitters seen directly or through specular surfaces.
             if let (Some(e), true) = (&mat.emission, front) {
                 for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(e) {
@@ -205,7 +206,9 @@ impl Gather<'_> {
                 return;
             };
             let (p, nf) = (hit.p, hit.nf);
-            match &scene.material(&hit).kind {
+            let mat = scene.material(&hit);
+            mat.absorb_inside(&hit, t);
+            match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {
                     // No cache point within the search cap means (almost surely) fewer than
                     // a handful of photons there: the irradiance is taken as 0 rather than

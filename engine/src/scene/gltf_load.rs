@@ -639,10 +639,12 @@ fn read_material(
         }
     };
     let emission = read_emission(m, &extras, ctx, (&element, &name), warnings)?;
+    let volume = read_volume(m, &kind, ctx, &element)?;
     Ok(Material {
         name,
         kind,
         emission,
+        volume,
     })
 }
 
@@ -701,14 +703,40 @@ fn read_glass(
     };
     ior.validate(360.0, 830.0)
         .map_err(|e| ctx.err(&element, e.to_string()))?;
-    if let Some(v) = m.volume()
-        && (v.attenuation_distance().is_finite() || v.attenuation_color() != [1.0; 3])
-    {
-        warnings.push(format!(
-            "{element} '{name}': KHR_materials_volume attenuation is not rendered (clear glass)"
+    Ok(ior)
+}
+
+/// `KHR_materials_volume` attenuation of a glass; None when it absorbs nothing (or the
+/// material is not a glass).
+fn read_volume(
+    m: &gltf::Material,
+    kind: &MaterialKind,
+    ctx: &Ctx,
+    element: &str,
+) -> Result<Option<super::Volume>, SceneError> {
+    let Some(v) = m.volume() else {
+        return Ok(None);
+    };
+    let distance = v.attenuation_distance() as f64;
+    let color = finite_rgb(
+        v.attenuation_color(),
+        ctx,
+        element,
+        "KHR_materials_volume.attenuationColor",
+    )?;
+    if !(distance > 0.0) {
+        return Err(ctx.err(
+            format!("{element}.KHR_materials_volume.attenuationDistance"),
+            format!("{distance} must be > 0"),
         ));
     }
-    Ok(ior)
+    let absorbs = distance.is_finite() && color.iter().any(|&c| c < 1.0);
+    Ok(
+        (absorbs && matches!(kind, MaterialKind::Dielectric { .. })).then_some(super::Volume {
+            color: color.map(|c| c.min(1.0)),
+            distance,
+        }),
+    )
 }
 
 /// The emission of a material: `emissiveFactor × KHR_materials_emissive_strength`, shaped

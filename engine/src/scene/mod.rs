@@ -51,6 +51,18 @@ pub struct Material {
     pub kind: MaterialKind,
     /// Emitted radiance of the front face (glTF: counter-clockwise winding).
     pub emission: Option<Spectrum>,
+    /// Absorption inside a glass (glTF `KHR_materials_volume`), if any.
+    pub volume: Option<Volume>,
+}
+
+/// Beer–Lambert absorption inside a closed glass: after `distance` scene units inside,
+/// the light that is left has the colour `color` (glTF's attenuationColor and
+/// attenuationDistance), so σ(λ) = −ln c(λ) / distance per wavelength.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Volume {
+    /// Linear-sRGB transmittance colour after `distance`, upsampled like a reflectance.
+    pub color: [f64; 3],
+    pub distance: f64,
 }
 
 #[derive(Clone, Debug, PartialEq)]

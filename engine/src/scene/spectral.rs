@@ -8,7 +8,7 @@ use super::{Material, MaterialKind, PunctualKind, PunctualLight, Scene};
 use crate::geometry::{Accel, SurfaceHit, TriData, triangle_normal};
 use crate::lights::{Light, LightKind, LightSet};
 use crate::sampling::one_minus_cos;
-use crate::spectral::{BinGrid, Role, Transport};
+use crate::spectral::{BinGrid, Role, Spectrum, Transport};
 
 /// Surface behaviour with per-bin data.
 #[derive(Clone, Debug)]
@@ -31,6 +31,20 @@ pub struct SMaterial {
     pub name: String,
     pub kind: SurfaceKind,
     pub emission: Option<Vec<f32>>,
+    /// Absorption coefficient σ per bin inside a glass (per scene unit), if it absorbs.
+    pub absorption: Option<Vec<f32>>,
+}
+
+impl SMaterial {
+    /// A segment that ends on the back face of an absorbing glass ran inside it:
+    /// Beer–Lambert over its length, into `t` (closed glass objects; a surface nested
+    /// inside a glass does not know it is immersed).
+    #[inline]
+    pub fn absorb_inside(&self, hit: &SurfaceHit, t: &mut [f32]) {
+        if let (false, Some(sigma)) = (hit.front, &self.absorption) {
+            crate::materials::absorb(t, sigma, hit.t);
+        }
+    }
 }
 
 pub struct SpectralScene {
@@ -179,6 +193,12 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
         name: m.name.clone(),
         kind,
         emission: m.emission.as_ref().map(|e| grid.project(e, Role::Emission)),
+        absorption: m.volume.as_ref().map(|v| {
+            grid.project(&Spectrum::Reflectance(v.color), Role::Reflectance)
+                .into_iter()
+                .map(|c| -(c.clamp(1e-6, 1.0) as f64).ln() as f32 / v.distance as f32)
+                .collect()
+        }),
     }
 }
 
