@@ -352,6 +352,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
         triangles: vec![[Vec3::ZERO, Vec3::X, Vec3::Y]],
         triangle_material: vec![0],
         shading_normals: vec![],
+        triangle_uvs: vec![],
         materials: vec![Material {
             name: "m".into(),
             kind: MaterialKind::Diffuse {
@@ -359,6 +360,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
             },
             emission: Some(Spectrum::Reflectance([-1.0, -1.0, -1.0])),
             volume: None,
+            base_color_texture: None,
         }],
         lights: vec![],
         camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0),

@@ -76,6 +76,7 @@ fn every_blender_fixture_loads_and_renders_with_the_camera_shape() {
         ("default-lights-off.glb", "sky"),
         ("sun.glb", "sun"),
         ("spotlit-prism.glb", "spot"),
+        ("textured-glass.glb", "sun"),
     ] {
         let s = scene::load(&blender(name)).unwrap();
         // Blender's camera is 16:9: the default image is 16:9 too.
@@ -120,6 +121,19 @@ fn every_blender_fixture_loads_and_renders_with_the_camera_shape() {
     assert!(glass.is_some(), "{:?}", s.materials);
     // Its smooth-shaded Suzanne brought vertex normals along.
     assert_eq!(s.shading_normals.len(), s.triangles.len());
+    // Blender's image texture arrives as a base-colour texture with UVs; the smooth glass
+    // sphere disperses.
+    let t = scene::load(&blender("textured-glass.glb")).unwrap();
+    assert!(t.materials.iter().any(|m| m.base_color_texture.is_some()));
+    assert_eq!(t.triangle_uvs.len(), t.triangles.len());
+    assert!(t.materials.iter().any(
+        |m| matches!(&m.kind, scene::MaterialKind::Dielectric { ior } if ior.is_dispersive())
+    ));
+    assert!(
+        !t.warnings.iter().any(|w| w.contains("baseColorTexture")),
+        "{:?}",
+        t.warnings
+    );
 }
 
 #[test]

@@ -75,6 +75,7 @@ impl Builder {
             kind,
             emission,
             volume: None,
+            base_color_texture: None,
         });
         self.triangle_material
             .extend(std::iter::repeat_n(m, tris.len()));
@@ -86,6 +87,7 @@ impl Builder {
             triangles: self.triangles,
             triangle_material: self.triangle_material,
             shading_normals: vec![],
+            triangle_uvs: vec![],
             materials: self.materials,
             lights: vec![],
             camera,

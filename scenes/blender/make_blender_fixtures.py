@@ -10,6 +10,8 @@ Writes, beside this script:
 - sun.glb                 the cube on a ground plane under a Sun (directional light)
 - spotlit-prism.glb       10 m stage: a 10° spot through an N-SF11 prism (custom property
                           prismap = {"glass": "N-SF11"}), Suzanne, a dim emissive panel
+- textured-glass.glb      a cube with an image texture (a generated 8×8 checker, packed),
+                          a smooth-shaded N-SF11 glass sphere, under a Sun
 """
 import math
 import os
@@ -112,6 +114,44 @@ def spotlit_prism():
     export("spotlit-prism.glb")
 
 
+def textured_glass():
+    startup()
+    bpy.data.objects.remove(bpy.data.objects["Light"])
+    cube = bpy.data.objects["Cube"]
+    cube.location = (-1.5, 0, 0)
+    img = bpy.data.images.new("checker", 8, 8)
+    px = []
+    for y in range(8):
+        for x in range(8):
+            on = (x + y) % 2 == 0
+            px += [0.9, 0.2, 0.1, 1.0] if on else [0.1, 0.3, 0.8, 1.0]
+    img.pixels = px
+    img.pack()
+    m = material("checker", (1, 1, 1))
+    tex = m.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.interpolation = "Closest"
+    m.node_tree.links.new(tex.outputs["Color"], m.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    cube.data.materials.clear()
+    cube.data.materials.append(m)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.8, location=(1.2, 0, 0), segments=32, ring_count=16)
+    bpy.ops.object.shade_smooth()
+    glass = material("N-SF11 glass", (1, 1, 1), roughness=0.0)
+    bsdf = glass.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Transmission Weight"].default_value = 1.0
+    bsdf.inputs["IOR"].default_value = 1.78
+    glass["prismap"] = {"glass": "N-SF11"}
+    bpy.context.object.data.materials.append(glass)
+    bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, -1))
+    bpy.context.object.data.materials.append(material("ground", (0.6, 0.6, 0.6)))
+    sun = bpy.data.lights.new("Sun", type="SUN")
+    sun.energy = 3.0
+    obj = bpy.data.objects.new("Sun", sun)
+    obj.rotation_euler = (math.radians(30), math.radians(15), 0)
+    bpy.context.collection.objects.link(obj)
+    export("textured-glass.glb")
+
+
 def direction_to_euler(d):
     from mathutils import Vector
     return Vector(d).to_track_quat("-Z", "Y").to_euler()
@@ -121,3 +161,4 @@ if __name__ == "__main__":
     default_scenes()
     sun_scene()
     spotlit_prism()
+    textured_glass()

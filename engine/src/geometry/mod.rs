@@ -67,6 +67,10 @@ pub struct SurfaceHit {
     pub front: bool,
     /// Distance along the ray.
     pub t: f32,
+    /// Barycentric coordinates (b1, b2) of the hit in its triangle.
+    pub bary: (f32, f32),
+    /// The triangle's index in scene order.
+    pub prim: u32,
     /// The interpolated shading normal turned to the same side as `nf` (equal to `nf` on
     /// flat-shaded triangles).
     pub ns: Vec3,
@@ -88,9 +92,10 @@ impl SurfaceHit {
         let front = dir.dot(n) < 0.0;
         let p = origin + dir * t;
         let nf = if front { n } else { -n };
+        let bary = tri.barycentric(p);
         let ns = match shading {
             Some(vn) => {
-                let (b1, b2) = tri.barycentric(p);
+                let (b1, b2) = bary;
                 let s = (vn[0] * (1.0 - b1 - b2) + vn[1] * b1 + vn[2] * b2).normalize_or_zero();
                 // Turned to the geometric side the ray came from; a degenerate blend is flat.
                 let s = if s.dot(nf) < 0.0 { -s } else { s };
@@ -108,6 +113,8 @@ impl SurfaceHit {
             nf,
             front,
             t,
+            bary,
+            prim: 0,
             ns,
             material: tri.material,
         }

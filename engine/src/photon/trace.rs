@@ -160,6 +160,8 @@ fn trace_one(
     };
     let grid = &scene.grid;
     let mut splits = 0;
+    // A textured surface's reflectance at a hit (allocated only by textured scenes).
+    let mut texel = Vec::new();
     let mut stack = vec![first];
     while let Some(mut path) = stack.pop() {
         while path.depth < settings.max_bounces {
@@ -176,6 +178,7 @@ fn trace_one(
                     if caustic && path.specular_seen && !path.diffuse_seen {
                         caustics.push(grid, p, nf, &path.flux);
                     }
+                    let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut texel);
                     if !russian_roulette(&mut path.flux, reflectance, rng.next_f32()) {
                         break;
                     }

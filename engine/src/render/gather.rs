@@ -36,9 +36,20 @@ pub struct Scratch {
     tmp: Vec<f32>,
     acc: Vec<f32>,
     fg: Vec<f32>,
-    fg_t: Vec<f32>,
+    /// A final-gather ray's throughput, result, search and texel buffers.
+    ray: RayBuffers,
     /// The k-nearest search's candidates.
     found: Vec<(f32, u32)>,
+    /// Textured reflectance at the camera hit.
+    refl: Vec<f32>,
+}
+
+/// What one final-gather ray works in.
+struct RayBuffers {
+    t: Vec<f32>,
+    out: Vec<f32>,
+    found: Vec<(f32, u32)>,
+    texel: Vec<f32>,
 }
 
 impl Scratch {
@@ -48,8 +59,14 @@ impl Scratch {
             tmp: vec![0.0; n],
             acc: vec![0.0; n],
             fg: vec![0.0; n],
-            fg_t: vec![0.0; n],
+            ray: RayBuffers {
+                t: vec![0.0; n],
+                out: vec![0.0; n],
+                found: Vec::new(),
+                texel: Vec::new(),
+            },
             found: Vec::new(),
+            refl: Vec::new(),
         }
     }
 }
@@ -112,7 +129,10 @@ impl Gather<'_> {
             }
             match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {
+                    let mut buf = std::mem::take(&mut s.refl);
+                    let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut buf);
                     self.shade_diffuse(p, nf, reflectance, rng, s);
+                    s.refl = buf;
                     for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(&s.acc) {
                         *o += t * l;
                     }
@@ -167,15 +187,8 @@ impl Gather<'_> {
         s.fg.fill(0.0);
         for _ in 0..self.final_gather_rays {
             let dir = cosine_hemisphere(nf, rng.next_2d());
-            self.final_gather_ray(
-                self.scene.accel.offset(p, nf, dir),
-                dir,
-                rng,
-                &mut s.fg_t,
-                &mut s.tmp,
-                &mut s.found,
-            );
-            spd::add_scaled(&mut s.fg, &s.tmp, 1.0);
+            self.final_gather_ray(self.scene.accel.offset(p, nf, dir), dir, rng, &mut s.ray);
+            spd::add_scaled(&mut s.fg, &s.ray.out, 1.0);
         }
         spd::add_scaled(
             &mut s.acc,
@@ -189,16 +202,14 @@ impl Gather<'_> {
     /// Radiance along a final-gather ray from the global map at its first diffuse hit
     /// (through mirrors and glass). Emitters are not counted: direct light and caustics
     /// have their own estimates.
-    fn final_gather_ray(
-        &self,
-        mut origin: Vec3,
-        mut dir: Vec3,
-        rng: &mut Rng,
-        t: &mut [f32],
-        out: &mut [f32],
-        found: &mut Vec<(f32, u32)>,
-    ) {
+    fn final_gather_ray(&self, mut origin: Vec3, mut dir: Vec3, rng: &mut Rng, b: &mut RayBuffers) {
         let scene = self.scene;
+        let RayBuffers {
+            t,
+            out,
+            found,
+            texel,
+        } = b;
         out.fill(0.0);
         t.fill(1.0);
         for _ in 0..self.max_bounces {
@@ -219,6 +230,7 @@ impl Gather<'_> {
                         }
                         None => self.density(self.global, p, nf, self.global_kernel, found, out),
                     }
+                    let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
                     spd::mul_assign(out, reflectance);
                     spd::mul_assign(out, t);
                     spd::scale(out, std::f32::consts::FRAC_1_PI);

@@ -21,6 +21,7 @@ const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_materials_transmission",
     "KHR_materials_volume",
     "KHR_materials_dispersion",
+    "KHR_texture_transform",
 ];
 
 /// Deepest node hierarchy accepted (deeper is almost surely a cycle).
@@ -112,6 +113,7 @@ fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
             triangles: Vec::new(),
             triangle_material: Vec::new(),
             shading_normals: Vec::new(),
+            triangle_uvs: Vec::new(),
             materials: Vec::new(),
             lights: Vec::new(),
             environment: None,
@@ -245,6 +247,122 @@ fn check_buffers(doc: &gltf::Document, ctx: &Ctx) -> Result<(), SceneError> {
     Ok(())
 }
 
+/// Appends a triangle's attribute to a per-triangle list that exists only once some
+/// triangle has the attribute: earlier triangles are filled with `default` then.
+fn push_per_triangle<T: Copy>(
+    list: &mut Vec<T>,
+    triangles_before: usize,
+    value: Option<T>,
+    default: T,
+) {
+    match value {
+        Some(v) => {
+            list.resize(triangles_before, default);
+            list.push(v);
+        }
+        None if !list.is_empty() => list.push(default),
+        None => {}
+    }
+}
+
+/// A texture from a glTF texture reference: decoded (PNG or JPEG, at most
+/// `MAX_TEXTURE_SIDE` a side), sRGB-decoded to linear, with its sampler and transform.
+fn read_texture(
+    info: &gltf::texture::Info,
+    buffers: &[gltf::buffer::Data],
+    ctx: &Ctx,
+    element: &str,
+    warnings: &mut Vec<String>,
+) -> Result<super::texture::TextureRef, SceneError> {
+    use super::texture::{MAX_TEXTURE_SIDE, Texture, TextureRef, Wrap, uv_transform};
+    let tex = info.texture();
+    let el = format!("{element}.baseColorTexture (textures[{}])", tex.index());
+    let bytes: Vec<u8> = match tex.source().source() {
+        gltf::image::Source::View { view, .. } => {
+            let data = buffers
+                .get(view.buffer().index())
+                .ok_or_else(|| ctx.err(&el, "image buffer missing"))?;
+            let end = view.offset().checked_add(view.length());
+            match end {
+                Some(end) if end <= data.0.len() => data.0[view.offset()..end].to_vec(),
+                _ => return Err(ctx.err(&el, "image buffer view out of range")),
+            }
+        }
+        gltf::image::Source::Uri { uri, .. } => {
+            if let Some(rest) = uri.strip_prefix("data:") {
+                let b64 = rest.split_once(',').map(|(_, d)| d).unwrap_or_default();
+                use base64::Engine as _;
+                base64::engine::general_purpose::STANDARD
+                    .decode(b64)
+                    .map_err(|e| ctx.err(&el, format!("image data URI: {e}")))?
+            } else {
+                check_relative_uri(uri, ctx, &el)?;
+                let base = ctx
+                    .base
+                    .ok_or_else(|| ctx.err(&el, "external image but no folder to read it from"))?;
+                let path = base.join(percent_decode(uri));
+                std::fs::read(&path)
+                    .map_err(|e| ctx.err(&el, format!("image '{}': {e}", path.display())))?
+            }
+        }
+    };
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(&bytes))
+        .with_guessed_format()
+        .map_err(|e| ctx.err(&el, e.to_string()))?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_TEXTURE_SIDE);
+    limits.max_image_height = Some(MAX_TEXTURE_SIDE);
+    reader.limits(limits);
+    let img = reader
+        .decode()
+        .map_err(|e| {
+            ctx.err(
+                &el,
+                format!("cannot decode the image (PNG and JPEG are read): {e}"),
+            )
+        })?
+        .to_rgb8();
+    let decode = |v: u8| crate::spectral::color::srgb_decode(v as f32 / 255.0);
+    let texels = img.pixels().map(|p| p.0.map(decode)).collect();
+    let sampler = tex.sampler();
+    let wrap = |w: gltf::texture::WrappingMode| match w {
+        gltf::texture::WrappingMode::ClampToEdge => Wrap::Clamp,
+        gltf::texture::WrappingMode::MirroredRepeat => Wrap::Mirror,
+        gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+    };
+    let linear = !matches!(
+        sampler.mag_filter(),
+        Some(gltf::texture::MagFilter::Nearest)
+    );
+    let transform = match info.texture_transform() {
+        Some(t) => {
+            if t.tex_coord().is_some_and(|c| c != 0) {
+                warnings.push(format!(
+                    "{el}: KHR_texture_transform texCoord ignored (TEXCOORD_0 used)"
+                ));
+            }
+            uv_transform(t.offset(), t.rotation(), t.scale())
+        }
+        None => glam::Mat3::IDENTITY,
+    };
+    if info.tex_coord() != 0 {
+        warnings.push(format!(
+            "{el}: texCoord {} ignored (TEXCOORD_0 used)",
+            info.tex_coord()
+        ));
+    }
+    Ok(TextureRef {
+        texture: std::sync::Arc::new(Texture {
+            width: img.width(),
+            height: img.height(),
+            texels,
+            wrap: (wrap(sampler.wrap_s()), wrap(sampler.wrap_t())),
+            linear,
+        }),
+        transform,
+    })
+}
+
 /// `%20` and friends in a URI, as the gltf crate decodes them.
 fn percent_decode(uri: &str) -> String {
     let bytes = uri.as_bytes();
@@ -319,7 +437,7 @@ impl Walk<'_> {
         if let Some(i) = self.material_map[slot] {
             return Ok(i);
         }
-        let material = read_material(m, self.ctx, &mut self.out.warnings)?;
+        let material = read_material(m, self.buffers, self.ctx, &mut self.out.warnings)?;
         self.out.materials.push(material);
         let i = (self.out.materials.len() - 1) as u32;
         self.material_map[slot] = Some(i);
@@ -378,6 +496,10 @@ impl Walk<'_> {
             .map(|it| it.map(Vec3::from).collect())
             .filter(|n: &Vec<Vec3>| n.len() == positions.len());
         let normal_matrix = glam::Mat3::from_mat4(*world).inverse().transpose();
+        let uvs: Option<Vec<[f32; 2]>> = reader
+            .read_tex_coords(0)
+            .map(|t| t.into_f32().collect())
+            .filter(|t: &Vec<[f32; 2]>| t.len() == positions.len());
         for tri in indices.chunks_exact(3) {
             let t = [0, 1, 2].map(|k| world.transform_point3(positions[tri[k] as usize]));
             if t.iter().any(|v| !v.is_finite()) {
@@ -406,6 +528,16 @@ impl Walk<'_> {
             } else if !self.out.shading_normals.is_empty() {
                 self.out.shading_normals.push([geometric; 3]);
             }
+            let uv = uvs
+                .as_ref()
+                .map(|uv| [0, 1, 2].map(|k| glam::Vec2::from(uv[tri[k] as usize])));
+            let filled = self.out.triangles.len();
+            push_per_triangle(
+                &mut self.out.triangle_uvs,
+                filled,
+                uv,
+                [glam::Vec2::ZERO; 3],
+            );
             self.out.triangles.push(t);
             self.out.triangle_material.push(mat_index);
         }
@@ -573,6 +705,7 @@ pub fn parse_spd_csv(text: &str) -> Result<PiecewiseLinear, String> {
 
 fn read_material(
     m: &gltf::Material,
+    buffers: &[gltf::buffer::Data],
     ctx: &Ctx,
     warnings: &mut Vec<String>,
 ) -> Result<Material, SceneError> {
@@ -593,10 +726,29 @@ fn read_material(
         &element,
         "baseColorFactor",
     )?;
-    if pbr.base_color_texture().is_some() {
-        warnings.push(format!(
-            "{element} '{name}': base colour texture ignored (factor used)"
-        ));
+    let base_color_texture = match pbr.base_color_texture() {
+        Some(info) => Some(read_texture(&info, buffers, ctx, &element, warnings)?),
+        None => None,
+    };
+    for (what, present) in [
+        ("emissiveTexture", m.emissive_texture().is_some()),
+        (
+            "metallicRoughnessTexture",
+            pbr.metallic_roughness_texture().is_some(),
+        ),
+        ("normalTexture", m.normal_texture().is_some()),
+        ("occlusionTexture", m.occlusion_texture().is_some()),
+        (
+            "KHR_materials_transmission.transmissionTexture",
+            m.transmission()
+                .is_some_and(|t| t.transmission_texture().is_some()),
+        ),
+    ] {
+        if present {
+            warnings.push(format!(
+                "{element} '{name}': {what} ignored (its factor is used)"
+            ));
+        }
     }
     let transmission = m
         .transmission()
@@ -645,6 +797,7 @@ fn read_material(
         kind,
         emission,
         volume,
+        base_color_texture,
     })
 }
 

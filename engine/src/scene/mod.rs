@@ -8,6 +8,7 @@
 
 mod gltf_load;
 mod spectral;
+pub mod texture;
 
 pub use crate::geometry::{SurfaceHit, TriData};
 pub use crate::lights::{Light, LightKind, LightSet};
@@ -53,6 +54,8 @@ pub struct Material {
     pub emission: Option<Spectrum>,
     /// Absorption inside a glass (glTF `KHR_materials_volume`), if any.
     pub volume: Option<Volume>,
+    /// glTF `baseColorTexture`: the reflectance is the factor's colour times the texel's.
+    pub base_color_texture: Option<texture::TextureRef>,
 }
 
 /// Beer–Lambert absorption inside a closed glass: after `distance` scene units inside,
@@ -135,6 +138,9 @@ pub struct Scene {
     /// triangle order; empty when no mesh has any (then geometric normals shade). A
     /// triangle without them repeats its geometric normal.
     pub shading_normals: Vec<[Vec3; 3]>,
+    /// Per-vertex texture coordinates (glTF `TEXCOORD_0`) of each triangle, in triangle
+    /// order; empty when no mesh has any.
+    pub triangle_uvs: Vec<[glam::Vec2; 3]>,
     pub materials: Vec<Material>,
     pub lights: Vec<PunctualLight>,
     /// Radiance of a uniform sky around the scene (seen where rays escape), if any: what a

@@ -4,6 +4,7 @@
 
 use glam::Vec3;
 
+use super::texture::TextureRef;
 use super::{Material, MaterialKind, PunctualKind, PunctualLight, Scene};
 use crate::geometry::{Accel, SurfaceHit, TriData, triangle_normal};
 use crate::lights::{Light, LightKind, LightSet};
@@ -33,6 +34,8 @@ pub struct SMaterial {
     pub emission: Option<Vec<f32>>,
     /// Absorption coefficient σ per bin inside a glass (per scene unit), if it absorbs.
     pub absorption: Option<Vec<f32>>,
+    /// A base-colour texture, with the factor it multiplies (linear RGB).
+    pub texture: Option<(TextureRef, [f32; 3])>,
 }
 
 impl SMaterial {
@@ -54,6 +57,8 @@ pub struct SpectralScene {
     pub tris: Vec<TriData>,
     /// Vertex shading normals per triangle (empty: flat shading everywhere).
     pub shading_normals: Vec<[Vec3; 3]>,
+    /// Vertex texture coordinates per triangle (empty: none).
+    pub triangle_uvs: Vec<[glam::Vec2; 3]>,
     pub materials: Vec<SMaterial>,
     pub lights: LightSet,
     /// Radiance of the uniform sky, seen by camera paths that escape (None: black).
@@ -120,6 +125,11 @@ impl SpectralScene {
             environment,
             grid,
             tris,
+            triangle_uvs: if scene.triangle_uvs.len() == scene.triangles.len() {
+                scene.triangle_uvs.clone()
+            } else {
+                Vec::new()
+            },
             shading_normals: if scene.shading_normals.len() == scene.triangles.len() {
                 scene.shading_normals.clone()
             } else {
@@ -148,13 +158,48 @@ impl SpectralScene {
     pub fn intersect(&self, origin: Vec3, dir: Vec3) -> Option<SurfaceHit> {
         let hit = self.accel.intersect(origin, dir, f32::INFINITY)?;
         let i = hit.prim as usize;
-        Some(SurfaceHit::new(
+        let mut h = SurfaceHit::new(
             &self.tris[i],
             self.shading_normals.get(i),
             origin,
             dir,
             hit.t,
-        ))
+        );
+        h.prim = hit.prim;
+        Some(h)
+    }
+
+    /// The diffuse reflectance (N bins) at a hit: the material's own, or, for a textured
+    /// material, factor × texel upsampled like any reflectance (Smits; on the RGB grid the
+    /// colour itself), written into `scratch`.
+    #[inline]
+    pub fn reflectance_at<'a>(
+        &'a self,
+        mat: &'a SMaterial,
+        reflectance: &'a [f32],
+        hit: &SurfaceHit,
+        scratch: &'a mut Vec<f32>,
+    ) -> &'a [f32] {
+        let (Some((tex, factor)), Some(uv)) =
+            (&mat.texture, self.triangle_uvs.get(hit.prim as usize))
+        else {
+            return reflectance;
+        };
+        let (b1, b2) = hit.bary;
+        let at = uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2;
+        let texel = tex.sample(at);
+        let rgb = [0, 1, 2].map(|c| (texel[c] * factor[c]).clamp(0.0, 1.0));
+        scratch.resize(self.grid.len(), 0.0);
+        match self.grid.smits() {
+            Some(smits) => {
+                smits.decode_into(rgb, scratch);
+                for v in scratch.iter_mut() {
+                    *v = v.clamp(0.0, 1.0);
+                }
+            }
+            None => scratch.copy_from_slice(&rgb),
+        }
+        scratch
     }
 
     pub fn material(&self, hit: &SurfaceHit) -> &SMaterial {
@@ -193,6 +238,16 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
         name: m.name.clone(),
         kind,
         emission: m.emission.as_ref().map(|e| grid.project(e, Role::Emission)),
+        texture: match (&m.base_color_texture, &m.kind) {
+            (
+                Some(t),
+                MaterialKind::Diffuse {
+                    reflectance: Spectrum::Reflectance(rgb),
+                },
+            ) => Some((t.clone(), rgb.map(|c| c as f32))),
+            (Some(t), MaterialKind::Diffuse { .. }) => Some((t.clone(), [1.0; 3])),
+            _ => None,
+        },
         absorption: m.volume.as_ref().map(|v| {
             grid.project(&Spectrum::Reflectance(v.color), Role::Reflectance)
                 .into_iter()
