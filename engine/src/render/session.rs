@@ -105,8 +105,8 @@ pub struct RenderSession {
 /// (the larger wins).
 const GLOBAL_CAP_TYPICAL: f32 = 8.0;
 const GLOBAL_CAP_DIAGONAL: f32 = 0.02;
-/// Final-gather rays read irradiance precomputed at every 4th global photon (Christensen
-/// 1999 uses a quarter too).
+/// Final-gather rays read irradiance precomputed at every 8th global photon (Christensen
+/// 1999 used a quarter; every 16th made the spot-lit stage 1.5 dB worse at 24 passes).
 const PRECOMPUTE_EVERY: usize = 8;
 /// The caustic map's search cap, in typical radii: the radius shrinks where caustic
 /// photons are dense (a sharper caustic) but does not widen beyond its start, so a query
