@@ -376,7 +376,11 @@ impl ViewerApp {
                 }
                 self.shown = Some(key);
                 if self.auto_exposure {
-                    self.exposure = crate::output::auto_exposure(&s.image);
+                    self.exposure = if s.emitter_pixels.len() == s.image.pixels.len() {
+                        crate::output::auto_exposure_skipping(&s.image, &s.emitter_pixels)
+                    } else {
+                        crate::output::auto_exposure(&s.image)
+                    };
                 }
                 self.snapshot = Some(s);
                 self.upload(ctx);

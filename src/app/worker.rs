@@ -43,6 +43,8 @@ pub struct Snapshot {
     pub probes: Vec<Probe>,
     pub skipped: Vec<String>,
     pub warnings: Vec<String>,
+    /// Pixels that see an emitter directly (left out of automatic exposure).
+    pub emitter_pixels: Arc<Vec<bool>>,
     /// Seconds from the `Start` to this snapshot.
     pub since_start: f64,
     /// A quick low-resolution first image shown right after a change
@@ -387,6 +389,7 @@ fn snapshot(s: &RenderSession, generation: u64, started: Instant) -> Snapshot {
         probes: s.probes().to_vec(),
         skipped: s.skipped(),
         warnings: s.scene().warnings.clone(),
+        emitter_pixels: s.emitter_pixels(),
         since_start: started.elapsed().as_secs_f64(),
         preview: false,
     }

@@ -62,7 +62,8 @@ pub fn render(args: RenderArgs) -> Result<()> {
         .with_context(|| format!("{}: render failed", scene.name))?;
     bar.finish_and_clear();
     let image = session.image();
-    let exposure = exposure.unwrap_or_else(|| output::auto_exposure(&image));
+    let exposure = exposure
+        .unwrap_or_else(|| output::auto_exposure_skipping(&image, &session.emitter_pixels()));
     let is_png = output
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("png"));

@@ -75,10 +75,26 @@ impl ToneMap {
 /// grey, Reinhard's key), but never so bright that the brightest 1 % of pixels clip.
 /// 1 for a black image. Applies to display (PNG, the viewer); EXR stays linear.
 pub fn auto_exposure(image: &Image) -> f32 {
+    metered_exposure(image, None)
+}
+
+/// [`auto_exposure`] metered without the pixels in `skip` (true: an emitter seen
+/// directly, which may clip as it does in a photograph); then only the brightest 0.1 %
+/// of the other pixels may clip, so a small bright caustic (a rainbow on a dark stage)
+/// keeps its colours.
+pub fn auto_exposure_skipping(image: &Image, skip: &[bool]) -> f32 {
+    metered_exposure(image, Some(skip))
+}
+
+fn metered_exposure(image: &Image, skip: Option<&[bool]>) -> f32 {
+    let counted = |i: usize| skip.is_none_or(|s| !s.get(i).copied().unwrap_or(false));
+    let n_counted = (0..image.pixels.len()).filter(|&i| counted(i)).count();
     let mut y: Vec<f32> = image
         .pixels
         .iter()
-        .map(|p| luminance_of(*p))
+        .enumerate()
+        .filter(|(i, _)| counted(*i))
+        .map(|(_, p)| luminance_of(*p))
         .filter(|v| v.is_finite() && *v > 0.0)
         .collect();
     if y.is_empty() {
@@ -86,11 +102,12 @@ pub fn auto_exposure(image: &Image) -> f32 {
     }
     // Pixels at or near black count at a floor, so a mostly dark stage keeps its key.
     let floor = 1e-4 * y.iter().cloned().fold(0.0f32, f32::max);
-    let n = image.pixels.len() as f64;
+    let n = n_counted.max(1) as f64;
     let log_sum: f64 = y.iter().map(|v| (v.max(floor) as f64).ln()).sum::<f64>()
         + (n - y.len() as f64) * (floor as f64).ln();
     let log_avg = (log_sum / n).exp() as f32;
-    let k = ((y.len() - 1) as f64 * 0.99) as usize;
+    let percentile = if skip.is_some() { 0.999 } else { 0.99 };
+    let k = ((y.len() - 1) as f64 * percentile) as usize;
     let (_, p99, _) = y.select_nth_unstable_by(k, f32::total_cmp);
     let by_key = 0.18 / log_avg;
     let by_highlights = 0.95 / *p99;

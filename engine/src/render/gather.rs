@@ -74,12 +74,7 @@ impl Scratch {
 impl Gather<'_> {
     /// Camera ray direction through image position (x, y) in pixels (may be fractional).
     pub fn camera_dir(&self, x: f32, y: f32, width: u32, height: u32) -> Vec3 {
-        let c = &self.scene.camera;
-        let tan_y = (0.5 * c.yfov).tan();
-        let aspect = width as f32 / height as f32;
-        let sx = (2.0 * x / width as f32 - 1.0) * tan_y * aspect;
-        let sy = (1.0 - 2.0 * y / height as f32) * tan_y;
-        (c.forward + c.right * sx + c.up * sy).normalize()
+        camera_dir(&self.scene.camera, x, y, width, height)
     }
 
     /// Radiance (N bins) arriving at the camera through pixel (px, py), one jittered sample.
@@ -311,6 +306,16 @@ impl Gather<'_> {
             .max(self.r_min);
         spd::scale(out, 1.0 / (std::f32::consts::PI * r * r));
     }
+}
+
+/// The direction of camera `c`'s ray through image position (x, y) of a width × height
+/// image, in pixels (may be fractional).
+pub fn camera_dir(c: &crate::scene::Camera, x: f32, y: f32, width: u32, height: u32) -> Vec3 {
+    let tan_y = (0.5 * c.yfov).tan();
+    let aspect = width as f32 / height as f32;
+    let sx = (2.0 * x / width as f32 - 1.0) * tan_y * aspect;
+    let sy = (1.0 - 2.0 * y / height as f32) * tan_y;
+    (c.forward + c.right * sx + c.up * sy).normalize()
 }
 
 /// A bin drawn with probability ∝ `t`.

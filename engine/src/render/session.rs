@@ -99,6 +99,8 @@ pub struct RenderSession {
     bytes_per_emitted: Option<f64>,
     /// This pass's typical (median k-nearest) radii of the global and caustic maps.
     typical: (f32, f32),
+    /// Pixels whose centre sees an emitter directly (for exposure metering), once known.
+    emitter_pixels: std::sync::OnceLock<Arc<Vec<bool>>>,
 }
 
 /// The global map's search cap, in typical radii and as a fraction of the scene diagonal
@@ -171,6 +173,7 @@ impl RenderSession {
             probes: Vec::new(),
             bytes_per_emitted: None,
             typical: (0.0, 0.0),
+            emitter_pixels: std::sync::OnceLock::new(),
         }
     }
 
@@ -497,6 +500,36 @@ impl RenderSession {
         self.memory.caustic_map = maps.caustic.as_ref().map_or(0, |c| c.memory_bytes());
         self.memory.photon_maps = self.memory.global_map + self.memory.caustic_map;
         self.bytes_per_emitted = Some(self.memory.photon_maps as f64 / photons.max(1) as f64);
+    }
+
+    /// Which pixels see an emitter directly through their centre (one ray each, cast once):
+    /// what automatic exposure leaves out of its metering.
+    pub fn emitter_pixels(&self) -> Arc<Vec<bool>> {
+        self.emitter_pixels
+            .get_or_init(|| {
+                let (w, h) = (self.settings.width, self.settings.height);
+                let scene = &self.scene;
+                let cam = scene.camera;
+                let mask = (0..h)
+                    .into_par_iter()
+                    .flat_map_iter(|y| {
+                        (0..w).map(move |x| {
+                            let d = super::gather::camera_dir(
+                                &cam,
+                                x as f32 + 0.5,
+                                y as f32 + 0.5,
+                                w,
+                                h,
+                            );
+                            scene.intersect(cam.position, d).is_some_and(|hit| {
+                                hit.front && scene.material(&hit).emission.is_some()
+                            })
+                        })
+                    })
+                    .collect();
+                Arc::new(mask)
+            })
+            .clone()
     }
 
     /// Bytes per stored photon in the latest pass (records + search structure).
