@@ -363,21 +363,26 @@ fn read_texture(
     })
 }
 
-/// `%20` and friends in a URI, as the gltf crate decodes them.
+/// `%20` and friends in a URI, as the gltf crate decodes them (bytes, so any UTF-8 is
+/// safe; a malformed escape is kept as written).
 fn percent_decode(uri: &str) -> String {
     let bytes = uri.as_bytes();
+    let hex = |b: u8| (b as char).to_digit(16).map(|d| d as u8);
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
     while i < bytes.len() {
-        if bytes[i] == b'%'
-            && i + 2 < bytes.len()
-            && let Ok(v) = u8::from_str_radix(&uri[i + 1..(i + 3).min(uri.len())], 16)
-        {
-            out.push(v);
-            i += 3;
-        } else {
-            out.push(bytes[i]);
-            i += 1;
+        let escaped = (bytes[i] == b'%' && i + 2 < bytes.len())
+            .then(|| Some(hex(bytes[i + 1])? * 16 + hex(bytes[i + 2])?))
+            .flatten();
+        match escaped {
+            Some(v) => {
+                out.push(v);
+                i += 3;
+            }
+            None => {
+                out.push(bytes[i]);
+                i += 1;
+            }
         }
     }
     String::from_utf8_lossy(&out).into_owned()
@@ -1047,4 +1052,19 @@ fn read_camera(
         yfov,
         aspect,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::percent_decode;
+
+    #[test]
+    fn percent_decoding_never_panics() {
+        assert_eq!(percent_decode("my%20scene.bin"), "my scene.bin");
+        assert_eq!(percent_decode("ü%C3%BC.bin"), "üü.bin");
+        for s in ["%", "%2", "%zz", "a%é", "%%", "é%"] {
+            percent_decode(s);
+        }
+        assert_eq!(percent_decode("100%"), "100%");
+    }
 }
