@@ -86,9 +86,9 @@ fn main() {
         .iter()
         .fold((0.0, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
     println!(
-        "viewer benchmark: prism 512×512, 50 000 photons/pass, 8 final-gather rays, 20 bins, {} worker threads at the lowest priority",
+        "viewer benchmark: prism 512×512, 50 000 photons/pass, 8 final-gather rays, 20 bins, {} worker threads",
         std::thread::available_parallelism()
-            .map(|n| n.get())
+            .map(|n| n.get().saturating_sub(1).max(1))
             .unwrap_or(1)
     );
     println!(

@@ -187,19 +187,15 @@ fn run(
     current: Arc<AtomicU64>,
     repaint: impl Fn() + Sync,
 ) {
-    // Every core renders, at the lowest priority, so the UI thread (normal priority)
-    // always gets the CPU when it has a frame to build.
+    // Leave one core to the UI. (Rendering on every core at a lower priority made passes
+    // 3–5× slower in a software-rendered window — lavapipe under Xvfb paints at normal
+    // priority and took the CPU — although the headless benchmark gained; see BENCHMARKS.)
     let threads = std::thread::available_parallelism()
-        .map(|n| n.get())
+        .map(|n| n.get().saturating_sub(1).max(1))
         .unwrap_or(1);
     let pool = match rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("prismap-pass-{i}"))
-        .start_handler(|_| {
-            // Not fatal where the system refuses: the render just competes evenly.
-            let _ =
-                thread_priority::set_current_thread_priority(thread_priority::ThreadPriority::Min);
-        })
         .build()
     {
         Ok(p) => p,
