@@ -54,6 +54,15 @@ fn square_facing_minus_z(centre: Vec3, size: f32) -> Vec<[Vec3; 3]> {
     ]
 }
 
+/// The 4 × 4 floor y = 0 about the origin, facing +y.
+fn floor_4x4() -> Vec<[Vec3; 3]> {
+    let c = |x: f32, z: f32| Vec3::new(x, 0.0, z);
+    vec![
+        [c(-2.0, -2.0), c(-2.0, 2.0), c(2.0, 2.0)],
+        [c(-2.0, -2.0), c(2.0, 2.0), c(2.0, -2.0)],
+    ]
+}
+
 struct Builder {
     triangles: Vec<[Vec3; 3]>,
     triangle_material: Vec<u32>,
@@ -386,22 +395,7 @@ fn a_sun_lights_a_floor_with_rho_e_over_pi() {
     use prismap_engine::scene::{PunctualKind, PunctualLight};
     let (rho, e) = (0.5, 3.0);
     let mut b = Builder::new();
-    b.add(
-        vec![
-            [
-                Vec3::new(-2.0, 0.0, -2.0),
-                Vec3::new(-2.0, 0.0, 2.0),
-                Vec3::new(2.0, 0.0, 2.0),
-            ],
-            [
-                Vec3::new(-2.0, 0.0, -2.0),
-                Vec3::new(2.0, 0.0, 2.0),
-                Vec3::new(2.0, 0.0, -2.0),
-            ],
-        ],
-        diffuse(rho),
-        None,
-    );
+    b.add(floor_4x4(), diffuse(rho), None);
     let mut scene = b.scene(
         "sun-floor",
         Camera::look_at(Vec3::new(0.0, 1.0, 0.01), Vec3::ZERO, Vec3::Y, 0.5),
@@ -468,18 +462,7 @@ fn a_smooth_shaded_glass_ball_focuses_like_a_finely_tessellated_one() {
     use prismap_engine::spectral::BinGrid;
     let ball = |rings: usize, segments: usize, smooth: bool| {
         let mut b = Builder::new();
-        let floor = vec![
-            [
-                Vec3::new(-2.0, 0.0, -2.0),
-                Vec3::new(-2.0, 0.0, 2.0),
-                Vec3::new(2.0, 0.0, 2.0),
-            ],
-            [
-                Vec3::new(-2.0, 0.0, -2.0),
-                Vec3::new(2.0, 0.0, 2.0),
-                Vec3::new(2.0, 0.0, -2.0),
-            ],
-        ];
+        let floor = floor_4x4();
         b.add(floor.clone(), diffuse(0.5), None);
         let (tris, normals) = uv_sphere(Vec3::new(0.0, 1.25, 0.0), 0.5, rings, segments);
         let count = tris.len();
