@@ -116,7 +116,7 @@ fn every_blender_fixture_loads_and_renders_with_the_camera_shape() {
     // The custom property `prismap = {"glass": "N-SF11"}` made the prism dispersive.
     let s = scene::load(&blender("spotlit-prism.glb")).unwrap();
     let glass = s.materials.iter().find(
-        |m| matches!(&m.kind, scene::MaterialKind::Dielectric { ior } if ior.is_dispersive()),
+        |m| matches!(&m.kind, scene::MaterialKind::Dielectric { ior, .. } if ior.is_dispersive()),
     );
     assert!(glass.is_some(), "{:?}", s.materials);
     // Its smooth-shaded Suzanne brought vertex normals along.
@@ -127,7 +127,7 @@ fn every_blender_fixture_loads_and_renders_with_the_camera_shape() {
     assert!(t.materials.iter().any(|m| m.base_color_texture.is_some()));
     assert_eq!(t.triangle_uvs.len(), t.triangles.len());
     assert!(t.materials.iter().any(
-        |m| matches!(&m.kind, scene::MaterialKind::Dielectric { ior } if ior.is_dispersive())
+        |m| matches!(&m.kind, scene::MaterialKind::Dielectric { ior, .. } if ior.is_dispersive())
     ));
     assert!(
         !t.warnings.iter().any(|w| w.contains("baseColorTexture")),

@@ -114,7 +114,7 @@ fn prism_is_dispersive_real_glass_lit_by_a_small_spot() {
         .iter()
         .find(|m| matches!(m.kind, MaterialKind::Dielectric { .. }))
         .unwrap();
-    let MaterialKind::Dielectric { ior } = &glass.kind else {
+    let MaterialKind::Dielectric { ior, .. } = &glass.kind else {
         unreachable!()
     };
     assert!(ior.describe().contains("N-SF11"), "{}", ior.describe());

@@ -529,7 +529,7 @@ pub fn auto_bins(scene: &Scene) -> (usize, String) {
     let dispersive = scene
         .materials
         .iter()
-        .any(|m| matches!(&m.kind, MaterialKind::Dielectric { ior } if ior.is_dispersive()));
+        .any(|m| matches!(&m.kind, MaterialKind::Dielectric { ior, .. } if ior.is_dispersive()));
     let spectral_light = scene
         .materials
         .iter()

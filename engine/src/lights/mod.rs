@@ -210,14 +210,32 @@ impl LightSet {
         out: &mut [f32],
     ) {
         out.fill(0.0);
+        if let Some(s) = self.sample_direct(tris, accel, p, nf, rng) {
+            out.copy_from_slice(&self.lights[s.light].spectrum);
+            spd::scale(out, s.cos * s.weight);
+        }
+    }
+
+    /// One unoccluded light sample seen from `p` on the side `nf` faces: the light, the
+    /// direction to it, cos θ with `nf`, and the weight that turns the light's spectrum
+    /// into radiance (or irradiance, for punctual and distant lights) per unit solid angle
+    /// sampled — irradiance = spectrum · cos · weight. None when occluded or facing away.
+    pub fn sample_direct(
+        &self,
+        tris: &[TriData],
+        accel: &Accel,
+        p: Vec3,
+        nf: Vec3,
+        rng: &mut Rng,
+    ) -> Option<DirectSample> {
         if self.lights.is_empty() {
-            return;
+            return None;
         }
         let li = sample_cdf(&self.direct_cdf, rng.next_f32());
         let (light, pmf) = (&self.lights[li], self.direct_pmf[li]);
         let uv = rng.next_2d();
         if !(pmf > 0.0) {
-            return;
+            return None;
         }
         let (wn, dist, weight) = match &light.kind {
             LightKind::Distant { dir, .. } => (-*dir, f32::INFINITY, 1.0),
@@ -228,9 +246,7 @@ impl LightSet {
                 (wn, f32::INFINITY, std::f32::consts::PI / cos)
             }
             _ => {
-                let Some((target, weight)) = sample_towards(light, tris, p, uv) else {
-                    return;
-                };
+                let (target, weight) = sample_towards(light, tris, p, uv)?;
                 let w = target - p;
                 let dist = w.length();
                 (w / dist, dist, weight)
@@ -238,15 +254,41 @@ impl LightSet {
         };
         let cos_x = nf.dot(wn);
         if !(cos_x > 0.0 && weight.is_finite() && weight > 0.0) {
-            return;
+            return None;
         }
         let origin = accel.offset(p, nf, wn);
         if accel.occluded(origin, wn, dist * (1.0 - 1e-4)) {
-            return;
+            return None;
         }
-        out.copy_from_slice(&light.spectrum);
-        spd::scale(out, cos_x * weight / pmf);
+        Some(DirectSample {
+            light: li,
+            dir: wn,
+            cos: cos_x,
+            weight: weight / pmf,
+        })
     }
+
+    /// Whether light `i` is punctual or distant (no ray can hit it: only light sampling
+    /// sees it).
+    pub fn is_delta(&self, i: usize) -> bool {
+        matches!(
+            self.lights[i].kind,
+            LightKind::Point { .. } | LightKind::Spot { .. } | LightKind::Distant { .. }
+        )
+    }
+
+    pub fn spectrum(&self, i: usize) -> &[f32] {
+        &self.lights[i].spectrum
+    }
+}
+
+/// A light sample that reached its point (see [`LightSet::sample_direct`]).
+#[derive(Clone, Copy, Debug)]
+pub struct DirectSample {
+    pub light: usize,
+    pub dir: Vec3,
+    pub cos: f32,
+    pub weight: f32,
 }
 
 /// A point on `light` seen from `p` and its geometry weight (irradiance per unit

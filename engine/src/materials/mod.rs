@@ -1,6 +1,9 @@
-//! Scattering at smooth surfaces: Fresnel reflectance of a dielectric, the refraction
-//! direction, and mirror reflection. (Lambertian reflection is a cosine-weighted
-//! direction and a reflectance; it lives in the tracers.)
+//! Scattering at mirrors and glass: Fresnel reflectance of a dielectric, the refraction
+//! direction, mirror reflection, and (in [`microfacet`]) their rough GGX versions; one
+//! bounce routine per kind shared by the photon tracer and the gather. (Lambertian
+//! reflection is a cosine-weighted direction and a reflectance; it lives in the tracers.)
+
+pub mod microfacet;
 
 use glam::Vec3;
 
@@ -130,13 +133,85 @@ pub fn absorb(t: &mut [f32], sigma: &[f32], distance: f32) {
     }
 }
 
+/// What a metal does to a ray: a perfect mirror (`alpha` 0) or a GGX rough metal.
+/// `d`: incoming direction; `nf`/`ns`: geometric and shading normals turned to its side.
+/// Returns the new direction, the cosine Schlick's Fresnel is taken at, and the
+/// microfacet weight (G2/G1; 1 for the mirror); None when the sample is lost below the
+/// surface.
+pub fn metal_bounce(
+    alpha: f32,
+    d: Vec3,
+    nf: Vec3,
+    ns: Vec3,
+    u: [f32; 2],
+) -> Option<(Vec3, f32, f32)> {
+    if alpha <= 0.0 {
+        let r = reflect_shaded(d, nf, ns);
+        let h = (r - d).normalize_or_zero();
+        return Some((r, (-d).dot(h).max(0.0), 1.0));
+    }
+    let ev = microfacet::sample_rough_metal(microfacet::Ggx { alpha }, d, ns, u)?;
+    (ev.dir.dot(nf) > 0.0).then_some((ev.dir, ev.cos_m, ev.weight))
+}
+
+/// What a glass does to a ray: [`scatter_dielectric_shaded`] when smooth (`alpha` 0),
+/// else a GGX rough-dielectric sample. Returns the event and its weight (G2/G1; 1 when
+/// smooth), None when the sample is lost.
+pub fn dielectric_bounce(
+    alpha: f32,
+    d: Vec3,
+    n: Vec3,
+    ns: Vec3,
+    eta: f32,
+    u: [f32; 2],
+    u_choice: f32,
+) -> Option<(DielectricEvent, f32)> {
+    if alpha <= 0.0 {
+        return Some((scatter_dielectric_shaded(d, n, ns, eta, u_choice), 1.0));
+    }
+    let ggx = microfacet::Ggx { alpha };
+    let ev = microfacet::sample_rough_dielectric(ggx, d, n, ns, eta, u, u_choice)?;
+    let event = DielectricEvent {
+        dir: ev.dir,
+        transmitted: ev.transmitted,
+        eta_ratio: ev.eta_ratio,
+    };
+    Some((event, ev.weight))
+}
+
+/// Russian roulette after a metal bounce: `t` *= Schlick(F0 = `reflectance`, `cos`) ·
+/// `weight` per bin, then survives as [`russian_roulette`] does.
+pub fn russian_roulette_metal(
+    t: &mut [f32],
+    reflectance: &[f32],
+    cos: f32,
+    weight: f32,
+    u: f32,
+) -> bool {
+    russian_roulette_by(t, |i| microfacet::schlick(reflectance[i], cos) * weight, u)
+}
+
+/// Russian roulette on a scalar weight (≤ 1 for the microfacet models): survives with
+/// probability min(1, w) and keeps the path's size.
+pub fn russian_roulette_scalar(t: &mut [f32], w: f32, u: f32) -> bool {
+    russian_roulette_by(t, |_| w, u)
+}
+
 /// Russian roulette on a reflectance: multiplies `t` by ρ, then survives with
 /// p = min(1, Σ(t·ρ)/Σt) and divides by p (unbiased; the path's weight stays near its
 /// size before the bounce). Returns false when the path is absorbed. Shared by the photon
 /// tracer and the gather, so both sides end paths the same way.
 pub fn russian_roulette(t: &mut [f32], reflectance: &[f32], u: f32) -> bool {
+    russian_roulette_by(t, |i| reflectance[i], u)
+}
+
+/// [`russian_roulette`] with the factor of bin i given by `factor(i)`.
+#[inline]
+fn russian_roulette_by(t: &mut [f32], factor: impl Fn(usize) -> f32, u: f32) -> bool {
     let before = crate::spectral::spd::sum(t);
-    crate::spectral::spd::mul_assign(t, reflectance);
+    for (i, v) in t.iter_mut().enumerate() {
+        *v *= factor(i);
+    }
     let after = crate::spectral::spd::sum(t);
     if !(before > 0.0 && after > 0.0) {
         return false;

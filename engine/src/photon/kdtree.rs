@@ -10,26 +10,33 @@ const PARALLEL_CUTOFF: usize = 1 << 14;
 
 /// Computes the kd order: returns (permutation, axis per position in the new order).
 pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
-    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
+    // Points travel with their index (16 bytes each), so the selections compare memory
+    // they already hold instead of chasing an index per comparison.
+    let mut items: Vec<([f32; 3], u32)> = positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (*p, i as u32))
+        .collect();
     let mut axes = vec![0u8; positions.len()];
-    build(positions, &mut order, &mut axes);
-    (order, axes)
-}
-
-fn build(pos: &[[f32; 3]], order: &mut [u32], axes: &mut [u8]) {
-    let n = order.len();
-    if n <= 1 {
-        return;
-    }
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for &i in order.iter() {
-        let p = pos[i as usize];
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for (p, _) in &items {
         for a in 0..3 {
             lo[a] = lo[a].min(p[a]);
             hi[a] = hi[a].max(p[a]);
         }
     }
+    build(&mut items, &mut axes, (lo, hi));
+    (items.iter().map(|it| it.1).collect(), axes)
+}
+
+/// Splits `items` at its median along the longest axis of `bounds` (the parent's box cut
+/// at the parent's split: no rescan of the points per node).
+fn build(items: &mut [([f32; 3], u32)], axes: &mut [u8], bounds: ([f32; 3], [f32; 3])) {
+    let n = items.len();
+    if n <= 1 {
+        return;
+    }
+    let (lo, hi) = bounds;
     let ext = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
     let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
         0
@@ -39,21 +46,26 @@ fn build(pos: &[[f32; 3]], order: &mut [u32], axes: &mut [u8]) {
         2
     };
     let mid = n / 2;
-    order.select_nth_unstable_by(mid, |&a, &b| {
-        pos[a as usize][axis]
-            .total_cmp(&pos[b as usize][axis])
-            .then(a.cmp(&b))
+    items.select_nth_unstable_by(mid, |a, b| {
+        a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1))
     });
     axes[mid] = axis as u8;
-    let (left, rest) = order.split_at_mut(mid);
+    let split = items[mid].0[axis];
+    let (mut left_hi, mut right_lo) = (hi, lo);
+    left_hi[axis] = split;
+    right_lo[axis] = split;
+    let (left, rest) = items.split_at_mut(mid);
     let right = &mut rest[1..];
     let (al, arest) = axes.split_at_mut(mid);
     let ar = &mut arest[1..];
     if n > PARALLEL_CUTOFF {
-        rayon::join(|| build(pos, left, al), || build(pos, right, ar));
+        rayon::join(
+            || build(left, al, (lo, left_hi)),
+            || build(right, ar, (right_lo, hi)),
+        );
     } else {
-        build(pos, left, al);
-        build(pos, right, ar);
+        build(left, al, (lo, left_hi));
+        build(right, ar, (right_lo, hi));
     }
 }
 

@@ -99,6 +99,32 @@ pub struct Kernel {
     pub shrink: f32,
 }
 
+impl Kernel {
+    /// This kernel with its first search radius at `hint` (a neighbouring query's
+    /// k-nearest radius), if one is known (> 0). The result never depends on the start:
+    /// only how much searching finds it.
+    pub fn starting_at(self, hint: f32) -> Self {
+        if self.k > 0 && hint > 0.0 {
+            Self {
+                r_start: 1.1 * hint,
+                ..self
+            }
+        } else {
+            self
+        }
+    }
+}
+
+/// What a density estimate measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    /// The radius whose photons were summed (divide by π r²).
+    pub r: f32,
+    /// The k-nearest radius before the pass's shrink (`r_max` when fewer than k were
+    /// found; the fixed radius for a fixed kernel): a good start for a neighbour's search.
+    pub r_k: f32,
+}
+
 /// A searchable photon map.
 #[derive(Clone, Debug)]
 pub struct PhotonMap {
@@ -209,7 +235,7 @@ impl PhotonMap {
 
     /// Adds to `out` (N bins) the flux of the photons of a density estimate at `p` on a
     /// surface facing `n`, and returns the estimate's radius r (the caller divides by
-    /// π r²). Only photons on the same surface and side count ([`Self::same_surface`]).
+    /// π r²) and its k-nearest radius. Only photons on the same surface and side count ([`Self::same_surface`]).
     ///
     /// With `kernel.k > 0` the radius adapts per query (Jensen's k-nearest-neighbour
     /// estimate): r_k is the distance to the k-th nearest photon within `r_max` (or
@@ -227,7 +253,7 @@ impl PhotonMap {
         kernel: Kernel,
         found: &mut Vec<(f32, u32)>,
         out: &mut [f32],
-    ) -> f32 {
+    ) -> Estimate {
         let accept = |i: usize| self.same_surface(i, p, n);
         if kernel.k == 0 {
             let r = kernel.r_max * kernel.shrink;
@@ -238,7 +264,10 @@ impl PhotonMap {
                 }
             });
             self.sum_flux(grid, found.iter().map(|f| f.1 as usize), out);
-            return r;
+            return Estimate {
+                r,
+                r_k: kernel.r_max,
+            };
         }
         // The k nearest within r_max are the k nearest within any smaller radius that
         // holds k photons: most queries find them within the first radius (a range search
@@ -271,7 +300,10 @@ impl PhotonMap {
         let r2 = r2_k * kernel.shrink * kernel.shrink;
         let inside = found.iter().filter(|f| f.0 < r2).map(|f| f.1 as usize);
         self.sum_flux(grid, inside, out);
-        r2.sqrt()
+        Estimate {
+            r: r2.sqrt(),
+            r_k: r2_k.sqrt(),
+        }
     }
 
     /// Adds the flux of photons `ids` to `out` (N bins). Compact records are expanded as

@@ -8,6 +8,6 @@ pub mod record;
 pub mod trace;
 
 pub use irradiance::IrradianceCache;
-pub use map::{Kernel, PhotonBatch, PhotonMap};
+pub use map::{Estimate, Kernel, PhotonBatch, PhotonMap};
 pub use record::{Record, Storage};
 pub use trace::{PhotonPass, PhotonSettings, TraceStop, split_dispersive, trace_photons};

@@ -18,7 +18,10 @@ use rayon::prelude::*;
 
 use super::map::{PhotonBatch, PhotonMap};
 use super::record::Record;
-use crate::materials::{reflect_shaded, russian_roulette, scatter_dielectric_shaded};
+use crate::materials::{
+    dielectric_bounce, metal_bounce, russian_roulette, russian_roulette_metal,
+    russian_roulette_scalar,
+};
 use crate::sampling::{Purpose, Rng, cosine_hemisphere};
 use crate::scene::{SpectralScene, SurfaceKind};
 use crate::spectral::spd;
@@ -186,15 +189,24 @@ fn trace_one(
                     path.dir = cosine_hemisphere(nf, rng.next_2d());
                     path.origin = scene.accel.offset(p, nf, path.dir);
                 }
-                SurfaceKind::Mirror { reflectance } => {
-                    if !russian_roulette(&mut path.flux, reflectance, rng.next_f32()) {
+                SurfaceKind::Mirror { reflectance, alpha } => {
+                    let u = micro_sample(*alpha, rng);
+                    let Some((dir, cos, w)) = metal_bounce(*alpha, path.dir, nf, ns, u) else {
+                        break;
+                    };
+                    if !russian_roulette_metal(&mut path.flux, reflectance, cos, w, rng.next_f32())
+                    {
                         break;
                     }
                     path.specular_seen = true;
-                    path.dir = reflect_shaded(path.dir, nf, ns);
+                    path.dir = dir;
                     path.origin = scene.accel.offset(p, nf, path.dir);
                 }
-                SurfaceKind::Dielectric { eta, dispersive } => {
+                SurfaceKind::Dielectric {
+                    eta,
+                    dispersive,
+                    alpha,
+                } => {
                     let single = spd::single_nonzero(&path.flux);
                     if *dispersive && single.is_none() {
                         // Split here; the pieces continue from this same hit.
@@ -213,7 +225,15 @@ fn trace_one(
                         break;
                     }
                     let e = eta[single.unwrap_or(0)];
-                    let ev = scatter_dielectric_shaded(path.dir, n, ns, e, rng.next_f32());
+                    let u = micro_sample(*alpha, rng);
+                    let Some((ev, w)) =
+                        dielectric_bounce(*alpha, path.dir, n, ns, e, u, rng.next_f32())
+                    else {
+                        break;
+                    };
+                    if w < 1.0 && !russian_roulette_scalar(&mut path.flux, w, rng.next_f32()) {
+                        break;
+                    }
                     path.specular_seen = true;
                     path.dir = ev.dir;
                     path.origin = scene.accel.offset(p, n, path.dir);
@@ -222,6 +242,13 @@ fn trace_one(
         }
     }
     splits
+}
+
+/// The two numbers a rough surface samples its microfacet normal with; none drawn for a
+/// smooth one (so smooth scenes keep their random sequences).
+#[inline]
+pub(crate) fn micro_sample(alpha: f32, rng: &mut Rng) -> [f32; 2] {
+    if alpha > 0.0 { rng.next_2d() } else { [0.0; 2] }
 }
 
 /// Splits a multi-bin flux into single-bin fluxes (see the module docs).

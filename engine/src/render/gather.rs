@@ -6,7 +6,12 @@
 use glam::Vec3;
 
 use crate::geometry::SurfaceHit;
-use crate::materials::{reflect_shaded, russian_roulette, scatter_dielectric_shaded};
+use crate::materials::microfacet::{Frame, Ggx, reflection_lobe, schlick};
+use crate::materials::{
+    dielectric_bounce, fresnel_dielectric, metal_bounce, russian_roulette_metal,
+    russian_roulette_scalar,
+};
+use crate::photon::trace::micro_sample;
 use crate::photon::{IrradianceCache, Kernel, PhotonMap};
 use crate::sampling::{Rng, cosine_hemisphere};
 use crate::scene::{SpectralScene, SurfaceKind};
@@ -42,6 +47,10 @@ pub struct Scratch {
     found: Vec<(f32, u32)>,
     /// Textured reflectance at the camera hit.
     refl: Vec<f32>,
+    /// The last k-nearest radius of each map's estimates in this row (unshrunk): the
+    /// next pixel's search starts there. Reset per row so that results never depend on
+    /// which thread rendered what.
+    hints: [f32; 2],
 }
 
 /// What one final-gather ray works in.
@@ -67,7 +76,13 @@ impl Scratch {
             },
             found: Vec::new(),
             refl: Vec::new(),
+            hints: [0.0; 2],
         }
+    }
+
+    /// Forgets the radius hints: call at the start of every deterministic work unit.
+    pub fn start_row(&mut self) {
+        self.hints = [0.0; 2];
     }
 }
 
@@ -133,11 +148,72 @@ impl Gather<'_> {
                     }
                     return;
                 }
-                kind => match self.specular_bounce(kind, &hit, dir, &mut s.throughput, rng) {
-                    Some((o, d)) => (origin, dir) = (o, d),
-                    None => return,
-                },
+                kind => {
+                    self.rough_highlight(kind, &hit, dir, rng, s, out);
+                    match self.specular_bounce(kind, &hit, dir, &mut s.throughput, rng) {
+                        Some((o, d)) => (origin, dir) = (o, d),
+                        None => return,
+                    }
+                }
             }
+        }
+    }
+
+    /// The highlight of punctual and distant lights on a rough metal or glass, added to
+    /// `out` (times the path's throughput). No ray can hit those lights, so only light
+    /// sampling sees them; area lights and the sky are left to the sampled bounce (which
+    /// counts the emission it hits), so nothing is counted twice. Rough glass reflects
+    /// them here; light refracted through rough glass from a punctual light is not seen by
+    /// the camera (the caustic map still carries it to diffuse surfaces).
+    fn rough_highlight(
+        &self,
+        kind: &SurfaceKind,
+        hit: &SurfaceHit,
+        dir: Vec3,
+        rng: &mut Rng,
+        s: &mut Scratch,
+        out: &mut [f32],
+    ) {
+        let alpha = match kind {
+            SurfaceKind::Mirror { alpha, .. } | SurfaceKind::Dielectric { alpha, .. } => *alpha,
+            SurfaceKind::Diffuse { .. } => 0.0,
+        };
+        if alpha <= 0.0 {
+            return;
+        }
+        let lights = &self.scene.lights;
+        let Some(sample) =
+            lights.sample_direct(&self.scene.tris, &self.scene.accel, hit.p, hit.nf, rng)
+        else {
+            return;
+        };
+        if !lights.is_delta(sample.light) {
+            return;
+        }
+        let frame = Frame::new(hit.ns);
+        let (wo, wi) = (frame.to_local(-dir), frame.to_local(sample.dir));
+        let Some((lobe, cos_h)) = reflection_lobe(Ggx { alpha }, wo, wi) else {
+            return;
+        };
+        // Irradiance per unit spectrum is weight·cos θ; the lobe already holds cos θi (on
+        // the shading normal), so the light's spectrum is scaled by weight·lobe.
+        let scale = sample.weight * lobe;
+        let l = lights.spectrum(sample.light);
+        match kind {
+            SurfaceKind::Mirror { reflectance, .. } => {
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o += s.throughput[i] * l[i] * scale * schlick(reflectance[i], cos_h);
+                }
+            }
+            SurfaceKind::Dielectric { eta, .. } => {
+                for (i, o) in out.iter_mut().enumerate() {
+                    let e = eta[i.min(eta.len() - 1)];
+                    let (a, b) = if hit.front { (1.0, e) } else { (e, 1.0) };
+                    let f = fresnel_dielectric(cos_h, a, b);
+                    *o += s.throughput[i] * l[i] * scale * f;
+                }
+            }
+            SurfaceKind::Diffuse { .. } => {}
         }
     }
 
@@ -159,6 +235,7 @@ impl Gather<'_> {
                 p,
                 nf,
                 self.global_kernel,
+                &mut s.hints[0],
                 &mut s.found,
                 &mut s.acc,
             );
@@ -174,7 +251,8 @@ impl Gather<'_> {
         spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
         // Caustics from the caustic map (irradiance, converted to radiance below).
         if let Some(cm) = self.caustic {
-            self.density(cm, p, nf, self.caustic_kernel, &mut s.found, &mut s.tmp);
+            let kernel = self.caustic_kernel;
+            self.density(cm, p, nf, kernel, &mut s.hints[1], &mut s.found, &mut s.tmp);
             spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
         }
         // Indirect light: final gather. Cosine sampling makes each ray's weight ρ, i.e.
@@ -223,7 +301,11 @@ impl Gather<'_> {
                         Some(c) => {
                             c.lookup(&self.scene.grid, p, nf, found, out);
                         }
-                        None => self.density(self.global, p, nf, self.global_kernel, found, out),
+                        None => {
+                            let mut hint = 0.0;
+                            let kernel = self.global_kernel;
+                            self.density(self.global, p, nf, kernel, &mut hint, found, out)
+                        }
                     }
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
                     spd::mul_assign(out, reflectance);
@@ -261,14 +343,19 @@ impl Gather<'_> {
         let (p, n, nf, ns) = (hit.p, hit.n, hit.nf, hit.ns);
         let next = match kind {
             SurfaceKind::Diffuse { .. } => return None,
-            SurfaceKind::Mirror { reflectance } => {
-                if !russian_roulette(t, reflectance, rng.next_f32()) {
+            SurfaceKind::Mirror { reflectance, alpha } => {
+                let u = micro_sample(*alpha, rng);
+                let (d, cos, w) = metal_bounce(*alpha, dir, nf, ns, u)?;
+                if !russian_roulette_metal(t, reflectance, cos, w, rng.next_f32()) {
                     return None;
                 }
-                let d = reflect_shaded(dir, nf, ns);
                 (self.scene.accel.offset(p, nf, d), d)
             }
-            SurfaceKind::Dielectric { eta, dispersive } => {
+            SurfaceKind::Dielectric {
+                eta,
+                dispersive,
+                alpha,
+            } => {
                 let e = match (dispersive, spd::single_nonzero(t)) {
                     (_, Some(bin)) => eta[bin],
                     (false, None) => eta[0],
@@ -280,7 +367,11 @@ impl Gather<'_> {
                         eta[bin]
                     }
                 };
-                let ev = scatter_dielectric_shaded(dir, n, ns, e, rng.next_f32());
+                let u = micro_sample(*alpha, rng);
+                let (ev, w) = dielectric_bounce(*alpha, dir, n, ns, e, u, rng.next_f32())?;
+                if w < 1.0 && !russian_roulette_scalar(t, w, rng.next_f32()) {
+                    return None;
+                }
                 if ev.transmitted {
                     spd::scale(t, ev.eta_ratio * ev.eta_ratio);
                 }
@@ -290,20 +381,25 @@ impl Gather<'_> {
         (spd::max(t) > 0.0).then_some(next)
     }
 
-    /// Irradiance estimate (N bins) from a photon map: Σ flux / (π r²), into `out`.
+    /// A density estimate of irradiance (N bins, Σ flux / (π r²)) into `out`, its search starting at `hint`
+    /// (the previous estimate's k-nearest radius; 0 for the kernel's own start), which it
+    /// updates.
+    #[allow(clippy::too_many_arguments)]
     fn density(
         &self,
         map: &PhotonMap,
         p: Vec3,
         nf: Vec3,
         kernel: Kernel,
+        hint: &mut f32,
         found: &mut Vec<(f32, u32)>,
         out: &mut [f32],
     ) {
         out.fill(0.0);
-        let r = map
-            .estimate(&self.scene.grid, p, nf, kernel, found, out)
-            .max(self.r_min);
+        let kernel = kernel.starting_at(*hint);
+        let e = map.estimate(&self.scene.grid, p, nf, kernel, found, out);
+        *hint = e.r_k;
+        let r = e.r.max(self.r_min);
         spd::scale(out, 1.0 / (std::f32::consts::PI * r * r));
     }
 }

@@ -426,6 +426,7 @@ impl RenderSession {
                         return None;
                     }
                     let mut spectra = Vec::new();
+                    scratch.start_row();
                     let row = (0..w)
                         .map(|x| {
                             let index = (y as u64) * w as u64 + x as u64;

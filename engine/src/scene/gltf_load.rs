@@ -769,27 +769,53 @@ fn read_material(
     }
     // glTF's special ior 0: reflection without refraction (Fresnel F0 = 1).
     let ior_zero = m.ior() == Some(0.0) && extras.glass.is_none();
+    let (metallic, roughness) = (pbr.metallic_factor(), pbr.roughness_factor());
+    for (field, v) in [("metallicFactor", metallic), ("roughnessFactor", roughness)] {
+        if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+            return Err(ctx.err(
+                format!("{element}.pbrMetallicRoughness.{field}"),
+                format!("{v} is outside [0, 1]"),
+            ));
+        }
+    }
     let kind = if ior_zero {
         warnings.push(format!(
-            "{element} '{name}': ior 0 (full reflection) rendered as a perfect mirror"
+            "{element} '{name}': ior 0 (full reflection) rendered as a metal of its base colour"
         ));
         MaterialKind::Mirror {
             reflectance: Spectrum::Reflectance(base_rgb),
+            roughness,
         }
     } else if transmission > 0.0 || extras.glass.is_some() {
         let ior = read_glass(m, &extras, transmission, ctx, (&element, &name), warnings)?;
-        MaterialKind::Dielectric { ior }
-    } else if pbr.metallic_factor() >= 0.99 && pbr.roughness_factor() <= 0.05 {
+        if metallic > 0.0 {
+            warnings.push(format!(
+                "{element} '{name}': metallicFactor {metallic} on a transmissive material ignored (rendered as glass)"
+            ));
+        }
+        MaterialKind::Dielectric { ior, roughness }
+    } else if metallic >= 0.5 {
+        if metallic < 1.0 {
+            warnings.push(format!(
+                "{element} '{name}': metallicFactor {metallic} rendered as a pure metal (1)"
+            ));
+        }
         MaterialKind::Mirror {
             reflectance: Spectrum::Reflectance(base_rgb),
+            roughness,
         }
     } else {
-        if pbr.metallic_factor() > 0.0 && m.index().is_some() {
-            warnings.push(format!(
-                "{element} '{name}': metallic {} roughness {} rendered as diffuse",
-                pbr.metallic_factor(),
-                pbr.roughness_factor()
-            ));
+        if m.index().is_some() {
+            if metallic > 0.0 {
+                warnings.push(format!(
+                    "{element} '{name}': metallicFactor {metallic} rendered as a non-metal (0)"
+                ));
+            }
+            if roughness < 0.5 {
+                warnings.push(format!(
+                    "{element} '{name}': roughnessFactor {roughness}: the glossy coat of a non-metal is not rendered (Lambertian only)"
+                ));
+            }
         }
         MaterialKind::Diffuse {
             reflectance: Spectrum::Reflectance(base_rgb),

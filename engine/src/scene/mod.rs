@@ -39,11 +39,17 @@ pub enum SceneError {
 pub enum MaterialKind {
     /// Lambertian reflection.
     Diffuse { reflectance: Spectrum },
-    /// A perfect mirror.
-    Mirror { reflectance: Spectrum },
-    /// A smooth dielectric (glass): Fresnel reflection and refraction, dispersive when
-    /// its index depends on wavelength.
-    Dielectric { ior: IorModel },
+    /// A metal: a perfect mirror of reflectance `reflectance` when `roughness` is 0, else
+    /// a GGX microfacet metal with Schlick's Fresnel from that reflectance (glTF's metal).
+    /// `roughness` is glTF's perceptual roughness: the GGX α is its square.
+    Mirror {
+        reflectance: Spectrum,
+        roughness: f32,
+    },
+    /// A dielectric (glass): Fresnel reflection and refraction, dispersive when its index
+    /// depends on wavelength; smooth when `roughness` is 0, else a GGX rough dielectric
+    /// (Walter et al. 2007).
+    Dielectric { ior: IorModel, roughness: f32 },
 }
 
 #[derive(Clone, Debug, PartialEq)]

@@ -17,13 +17,18 @@ pub enum SurfaceKind {
     Diffuse {
         reflectance: Vec<f32>,
     },
+    /// `alpha`: GGX roughness (0: a perfect mirror reflecting `reflectance`; else the
+    /// reflectance is Schlick's F0 per bin).
     Mirror {
         reflectance: Vec<f32>,
+        alpha: f32,
     },
-    /// `eta[i]`: index in bin i; `dispersive`: whether the bins differ.
+    /// `eta[i]`: index in bin i; `dispersive`: whether the bins differ; `alpha`: GGX
+    /// roughness (0: smooth).
     Dielectric {
         eta: Vec<f32>,
         dispersive: bool,
+        alpha: f32,
     },
 }
 
@@ -207,6 +212,17 @@ impl SpectralScene {
     }
 }
 
+/// The GGX α of a glTF perceptual roughness (its square); 0 (smooth) below
+/// [`crate::materials::microfacet::SMOOTH_ALPHA`].
+pub fn ggx_alpha(roughness: f32) -> f32 {
+    let a = roughness.clamp(0.0, 1.0).powi(2);
+    if a < crate::materials::microfacet::SMOOTH_ALPHA {
+        0.0
+    } else {
+        a
+    }
+}
+
 /// A material's per-bin data on `grid`.
 fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
     // Reflectances above 1 (Smits' basis reaches 1.0007) would add energy.
@@ -220,10 +236,14 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
         MaterialKind::Diffuse { reflectance } => SurfaceKind::Diffuse {
             reflectance: refl(reflectance),
         },
-        MaterialKind::Mirror { reflectance } => SurfaceKind::Mirror {
+        MaterialKind::Mirror {
+            reflectance,
+            roughness,
+        } => SurfaceKind::Mirror {
             reflectance: refl(reflectance),
+            alpha: ggx_alpha(*roughness),
         },
-        MaterialKind::Dielectric { ior } => {
+        MaterialKind::Dielectric { ior, roughness } => {
             let eta: Vec<f32> = (0..grid.len())
                 .map(|i| ior.eta(grid.ior_wavelength(i)) as f32)
                 .collect();
@@ -231,7 +251,11 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
                 && grid.len() > 1
                 && ior.is_dispersive()
                 && eta.iter().any(|&e| e != eta[0]);
-            SurfaceKind::Dielectric { eta, dispersive }
+            SurfaceKind::Dielectric {
+                eta,
+                dispersive,
+                alpha: ggx_alpha(*roughness),
+            }
         }
     };
     SMaterial {
