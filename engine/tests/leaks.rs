@@ -77,6 +77,7 @@ fn every_blender_fixture_loads_and_renders_with_the_camera_shape() {
         ("sun.glb", "sun"),
         ("spotlit-prism.glb", "spot"),
         ("textured-glass.glb", "sun"),
+        ("rough-materials.glb", "sun"),
     ] {
         let s = scene::load(&blender(name)).unwrap();
         // Blender's camera is 16:9: the default image is 16:9 too.
@@ -133,6 +134,47 @@ fn every_blender_fixture_loads_and_renders_with_the_camera_shape() {
         !t.warnings.iter().any(|w| w.contains("baseColorTexture")),
         "{:?}",
         t.warnings
+    );
+}
+
+#[test]
+fn blenders_rough_metal_rough_glass_and_thick_glass_arrive_as_such() {
+    // Issue #11: Blender's Principled BSDF exports metallic/roughness/transmission and a
+    // Volume Absorption as KHR_materials_volume; each maps to its own model.
+    let s = scene::load(&blender("rough-materials.glb")).unwrap();
+    let kind = |name: &str| {
+        &s.materials
+            .iter()
+            .find(|m| m.name == name)
+            .unwrap_or_else(|| panic!("no material {name}: {:?}", s.materials))
+            .kind
+    };
+    match kind("rough gold") {
+        scene::MaterialKind::Mirror { roughness, .. } => assert!((roughness - 0.35).abs() < 1e-6),
+        k => panic!("rough gold: {k:?}"),
+    }
+    match kind("frosted glass") {
+        scene::MaterialKind::Dielectric { roughness, .. } => {
+            assert!((roughness - 0.3).abs() < 1e-6)
+        }
+        k => panic!("frosted glass: {k:?}"),
+    }
+    match kind("silver mirror") {
+        scene::MaterialKind::Mirror { roughness, .. } => assert_eq!(*roughness, 0.0),
+        k => panic!("silver mirror: {k:?}"),
+    }
+    let green = s
+        .materials
+        .iter()
+        .find(|m| m.name == "thick green glass")
+        .unwrap();
+    let v = green.volume.as_ref().expect("KHR_materials_volume read");
+    assert!((v.distance - 0.5).abs() < 1e-6 && (v.color[1] - 0.8).abs() < 1e-6);
+    // The floor (roughness 0.8) renders as what it is: no approximation to warn about.
+    assert!(
+        !s.warnings.iter().any(|w| w.contains("'floor'")),
+        "{:?}",
+        s.warnings
     );
 }
 

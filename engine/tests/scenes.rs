@@ -388,3 +388,73 @@ fn fuzzer_crash_inputs_are_errors_not_panics() {
     }
     assert!(n >= 1);
 }
+
+#[test]
+fn metallic_roughness_maps_honestly_and_warns_per_material() {
+    // Issue #11: what each glTF metallic-roughness combination renders as, and a warning
+    // that names the material and the field wherever the model is approximated.
+    let text = cornell_text();
+    let with = |pbr: &str, ext: &str| {
+        let t = text.replacen(
+            "\"metallicFactor\": 0.0,\n    \"roughnessFactor\": 1.0",
+            pbr,
+            1,
+        );
+        let t = t.replacen(
+            "\"name\": \"white\",",
+            &format!("\"name\": \"white\",{ext}"),
+            1,
+        );
+        scene::load_from_slice(t.as_bytes(), "test.gltf", None).unwrap()
+    };
+    let first = |s: &scene::Scene| s.materials[0].kind.clone();
+    // A rough metal.
+    let s = with("\"metallicFactor\": 1.0, \"roughnessFactor\": 0.4", "");
+    assert!(
+        matches!(first(&s), MaterialKind::Mirror { roughness, .. } if roughness == 0.4),
+        "{:?}",
+        first(&s)
+    );
+    assert!(
+        !s.warnings.iter().any(|w| w.contains("'white'")),
+        "{:?}",
+        s.warnings
+    );
+    // A partly metallic material is rendered as a pure metal, and told so.
+    let s = with("\"metallicFactor\": 0.7, \"roughnessFactor\": 0.4", "");
+    assert!(matches!(first(&s), MaterialKind::Mirror { .. }));
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("materials[0] 'white'") && w.contains("metallicFactor 0.7")),
+        "{:?}",
+        s.warnings
+    );
+    // A glossy plastic loses its coat: Lambertian, with a warning naming roughnessFactor.
+    let s = with("\"metallicFactor\": 0.0, \"roughnessFactor\": 0.1", "");
+    assert!(matches!(first(&s), MaterialKind::Diffuse { .. }));
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("'white'") && w.contains("roughnessFactor 0.1")),
+        "{:?}",
+        s.warnings
+    );
+    // Rough glass keeps its roughness (it used to be dropped without a word).
+    let s = with(
+        "\"metallicFactor\": 0.0, \"roughnessFactor\": 0.5",
+        " \"extensions\": {\"KHR_materials_transmission\": {\"transmissionFactor\": 1}},",
+    );
+    assert!(
+        matches!(first(&s), MaterialKind::Dielectric { roughness, .. } if roughness == 0.5),
+        "{:?}",
+        first(&s)
+    );
+    // Out-of-range factors are errors naming the field and the value.
+    let t = text.replacen("\"roughnessFactor\": 1.0", "\"roughnessFactor\": 1.5", 1);
+    let e = error_of(&t);
+    assert!(
+        e.contains("materials[0]") && e.contains("roughnessFactor") && e.contains("1.5"),
+        "{e}"
+    );
+}

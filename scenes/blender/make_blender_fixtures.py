@@ -12,6 +12,10 @@ Writes, beside this script:
                           prismap = {"glass": "N-SF11"}), Suzanne, a dim emissive panel
 - textured-glass.glb      a cube with an image texture (a generated 8×8 checker, packed),
                           a smooth-shaded N-SF11 glass sphere, under a Sun
+- rough-materials.glb     under a Sun and a point light: a rough gold sphere (metallic 1,
+                          roughness 0.35), a rough glass sphere (transmission 1, roughness
+                          0.3), a thick green glass slab (Volume Absorption: exported as
+                          KHR_materials_volume) and a smooth silver mirror, on a grey floor
 """
 import math
 import os
@@ -152,6 +156,70 @@ def textured_glass():
     export("textured-glass.glb")
 
 
+def rough_materials():
+    startup()
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    light = bpy.data.objects["Light"]
+    light.location = (2.0, -2.0, 3.0)
+    bpy.ops.mesh.primitive_plane_add(size=12, location=(0, 0, 0))
+    bpy.context.object.data.materials.append(material("floor", (0.5, 0.5, 0.5)))
+
+    def sphere(name, loc):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=loc, segments=48, ring_count=24)
+        bpy.ops.object.shade_smooth()
+        bpy.context.object.name = name
+        return bpy.context.object
+
+    gold = material("rough gold", (1.0, 0.71, 0.29), roughness=0.35)
+    gold.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
+    sphere("Gold", (-1.4, 0, 0.6)).data.materials.append(gold)
+
+    frosted = material("frosted glass", (1, 1, 1), roughness=0.3)
+    bsdf = frosted.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Transmission Weight"].default_value = 1.0
+    bsdf.inputs["IOR"].default_value = 1.5
+    sphere("Frosted", (0.0, 0, 0.6)).data.materials.append(frosted)
+
+    # A thick green slab: Volume Absorption (colour, density) in the volume socket; the
+    # exporter writes KHR_materials_volume (attenuation distance = 1 / density).
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(1.5, 0, 0.5))
+    slab = bpy.context.object
+    slab.scale = (0.5, 1.2, 1.0)
+    green = material("thick green glass", (1, 1, 1), roughness=0.0)
+    bsdf = green.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Transmission Weight"].default_value = 1.0
+    bsdf.inputs["IOR"].default_value = 1.5
+    nodes, links = green.node_tree.nodes, green.node_tree.links
+    absorb = nodes.new("ShaderNodeVolumeAbsorption")
+    absorb.inputs["Color"].default_value = (0.2, 0.8, 0.3, 1.0)
+    absorb.inputs["Density"].default_value = 2.0
+    links.new(absorb.outputs["Volume"], nodes["Material Output"].inputs["Volume"])
+    # Blender's glTF settings node carries the thickness KHR_materials_volume needs.
+    group = bpy.data.node_groups.get("glTF Material Output") or bpy.data.node_groups.new(
+        "glTF Material Output", "ShaderNodeTree")
+    if "Thickness" not in [i.name for i in group.interface.items_tree]:
+        group.interface.new_socket("Thickness", in_out="INPUT", socket_type="NodeSocketFloat")
+    out = nodes.new("ShaderNodeGroup")
+    out.node_tree = group
+    out.inputs["Thickness"].default_value = 0.5
+    slab.data.materials.append(green)
+
+    bpy.ops.mesh.primitive_plane_add(size=1.6, location=(0, 1.6, 0.9), rotation=(math.radians(90), 0, 0))
+    silver = material("silver mirror", (0.97, 0.96, 0.91), roughness=0.0)
+    silver.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
+    bpy.context.object.data.materials.append(silver)
+
+    sun = bpy.data.lights.new("Sun", type="SUN")
+    sun.energy = 2.0
+    obj = bpy.data.objects.new("Sun", sun)
+    obj.rotation_euler = (math.radians(35), math.radians(-20), math.radians(20))
+    bpy.context.collection.objects.link(obj)
+    cam = bpy.data.objects["Camera"]
+    cam.location = (0.0, -5.5, 2.4)
+    cam.rotation_euler = direction_to_euler((0.0, 5.5, -1.9))
+    export("rough-materials.glb")
+
+
 def direction_to_euler(d):
     from mathutils import Vector
     return Vector(d).to_track_quat("-Z", "Y").to_euler()
@@ -162,3 +230,4 @@ if __name__ == "__main__":
     sun_scene()
     spotlit_prism()
     textured_glass()
+    rough_materials()
