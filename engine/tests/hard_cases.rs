@@ -361,6 +361,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
             emission: Some(Spectrum::Reflectance([-1.0, -1.0, -1.0])),
             volume: None,
             base_color_texture: None,
+            emissive_texture: None,
         }],
         lights: vec![],
         camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0),

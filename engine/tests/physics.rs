@@ -85,6 +85,7 @@ impl Builder {
             emission,
             volume: None,
             base_color_texture: None,
+            emissive_texture: None,
         });
         self.triangle_material
             .extend(std::iter::repeat_n(m, tris.len()));

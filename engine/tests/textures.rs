@@ -157,3 +157,95 @@ fn texture_transform_moves_the_texture_and_bad_images_are_named() {
         "{e}"
     );
 }
+
+/// The quad as an emitter: black base colour, emissiveFactor × emissiveTexture.
+fn emissive_quad_gltf(factor: [f32; 3]) -> String {
+    textured_quad_gltf("").replace(
+        r#""pbrMetallicRoughness":{"baseColorTexture":{"index":0},"metallicFactor":0}"#,
+        &format!(
+            r#""pbrMetallicRoughness":{{"baseColorFactor":[0,0,0,1],"metallicFactor":0}},"emissiveFactor":[{},{},{}],"emissiveTexture":{{"index":0}}"#,
+            factor[0], factor[1], factor[2]
+        ),
+    )
+}
+
+#[test]
+fn an_emissive_texture_is_seen_texel_by_texel_and_lights_by_its_mean() {
+    // Issue #11: glTF's emission is emissiveFactor × emissiveTexture. Seen head-on, each
+    // quarter of the quad shows factor × texel (exactly on the RGB grid; through the
+    // texel's spectrum times the factor's on spectral grids); as a light each triangle
+    // emits its own mean texel, so the scene's emitted power follows the texture.
+    let factor = [2.0f32, 2.0, 2.0];
+    let text = emissive_quad_gltf(factor);
+    assert!(text.contains("emissiveTexture"), "the replacement took");
+    let s = scene::load_from_slice(text.as_bytes(), "quad.gltf", None).unwrap();
+    assert!(s.materials[0].emissive_texture.is_some());
+    assert!(
+        s.environment.is_none(),
+        "an emissive quad is a light: no default sky"
+    );
+    assert!(
+        !s.warnings.iter().any(|w| w.contains("emissiveTexture")),
+        "{:?}",
+        s.warnings
+    );
+    for (storage, bins) in [(Storage::Compact, 16), (Storage::Rgb, 3)] {
+        let settings = RenderSettings {
+            bins,
+            storage,
+            width: 32,
+            height: 32,
+            photons_per_pass: 2_000,
+            final_gather_rays: 4,
+            ..RenderSettings::default()
+        };
+        let mut r = RenderSession::new(&s, settings).unwrap();
+        r.run_pass().unwrap();
+        let img = r.image();
+        let grid = r.scene().grid.clone();
+        let want = |rgb: [f32; 3]| -> [f32; 3] {
+            use prismap_engine::spectral::{Role, Spectrum};
+            if storage == Storage::Rgb {
+                return [0, 1, 2].map(|c| rgb[c] * factor[c]);
+            }
+            let mut v = grid.project(
+                &Spectrum::Reflectance(rgb.map(f64::from)),
+                Role::Reflectance,
+            );
+            let e = grid.project(&Spectrum::Illuminant(factor.map(f64::from)), Role::Emission);
+            prismap_engine::spectral::spd::mul_assign(&mut v, &e);
+            grid.to_linear_srgb(&v)
+        };
+        for (i, texel) in TEXELS.iter().enumerate() {
+            let want = want(*texel);
+            let (x, y) = (8 + 16 * (i as u32 % 2), 8 + 16 * (i as u32 / 2));
+            let got = img.get(x, y);
+            println!("{storage:?}: texel {i}: {got:?} (want {want:?})");
+            for c in 0..3 {
+                assert!(
+                    // 8-bit sRGB texels: a quantisation step is up to 0.5 % of the value.
+                    (got[c] - want[c]).abs() < 0.01 * want[c].max(0.1),
+                    "{storage:?} texel {i}: {got:?} vs {want:?}"
+                );
+            }
+        }
+        // The two triangles as lights: each emits the mean of the texels it covers.
+        let lights = &r.scene().lights;
+        let total: f32 = (0..2)
+            .map(|i| grid.to_xyz(lights.spectrum(i))[1] as f32)
+            .sum();
+        let untextured = grid.to_xyz(&grid.project(
+            &prismap_engine::spectral::Spectrum::Illuminant(factor.map(f64::from)),
+            prismap_engine::spectral::Role::Emission,
+        ))[1] as f32;
+        // Both triangles together cover the quad once: twice the mean texel luminance.
+        let mean_y: f32 = TEXELS
+            .iter()
+            .map(|t| 0.2126 * t[0] + 0.7152 * t[1] + 0.0722 * t[2])
+            .sum::<f32>()
+            / 4.0;
+        let ratio = total / (2.0 * mean_y * untextured);
+        println!("{storage:?}: emitted luminance {ratio:.4} of factor × mean texel");
+        assert!((ratio - 1.0).abs() < 0.05, "{storage:?}: {ratio}");
+    }
+}

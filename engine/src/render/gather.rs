@@ -132,10 +132,14 @@ impl Gather<'_> {
             let mat = scene.material(&hit);
             mat.absorb_inside(&hit, &mut s.throughput);
             // Emitters seen directly or through specular surfaces.
-            if let (Some(e), true) = (&mat.emission, front) {
-                for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(e) {
-                    *o += t * l;
+            if front {
+                let mut buf = std::mem::take(&mut s.refl);
+                if let Some(e) = scene.emission_at(mat, &hit, &mut buf) {
+                    for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(e) {
+                        *o += t * l;
+                    }
                 }
+                s.refl = buf;
             }
             match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {

@@ -269,6 +269,7 @@ fn push_per_triangle<T: Copy>(
 /// `MAX_TEXTURE_SIDE` a side), sRGB-decoded to linear, with its sampler and transform.
 fn read_texture(
     info: &gltf::texture::Info,
+    field: &str,
     buffers: &[gltf::buffer::Data],
     ctx: &Ctx,
     element: &str,
@@ -276,7 +277,7 @@ fn read_texture(
 ) -> Result<super::texture::TextureRef, SceneError> {
     use super::texture::{MAX_TEXTURE_SIDE, Texture, TextureRef, Wrap, uv_transform};
     let tex = info.texture();
-    let el = format!("{element}.baseColorTexture (textures[{}])", tex.index());
+    let el = format!("{element}.{field} (textures[{}])", tex.index());
     let bytes: Vec<u8> = match tex.source().source() {
         gltf::image::Source::View { view, .. } => {
             let data = buffers
@@ -732,11 +733,17 @@ fn read_material(
         "baseColorFactor",
     )?;
     let base_color_texture = match pbr.base_color_texture() {
-        Some(info) => Some(read_texture(&info, buffers, ctx, &element, warnings)?),
+        Some(info) => Some(read_texture(
+            &info,
+            "baseColorTexture",
+            buffers,
+            ctx,
+            &element,
+            warnings,
+        )?),
         None => None,
     };
     for (what, present) in [
-        ("emissiveTexture", m.emissive_texture().is_some()),
         (
             "metallicRoughnessTexture",
             pbr.metallic_roughness_texture().is_some(),
@@ -822,6 +829,18 @@ fn read_material(
         }
     };
     let emission = read_emission(m, &extras, ctx, (&element, &name), warnings)?;
+    // An emissive texture only matters where the factor emits (glTF multiplies them).
+    let emissive_texture = match (m.emissive_texture(), &emission) {
+        (Some(info), Some(_)) => Some(read_texture(
+            &info,
+            "emissiveTexture",
+            buffers,
+            ctx,
+            &element,
+            warnings,
+        )?),
+        _ => None,
+    };
     let volume = read_volume(m, &kind, ctx, &element)?;
     Ok(Material {
         name,
@@ -829,6 +848,7 @@ fn read_material(
         emission,
         volume,
         base_color_texture,
+        emissive_texture,
     })
 }
 

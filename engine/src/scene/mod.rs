@@ -62,6 +62,9 @@ pub struct Material {
     pub volume: Option<Volume>,
     /// glTF `baseColorTexture`: the reflectance is the factor's colour times the texel's.
     pub base_color_texture: Option<texture::TextureRef>,
+    /// glTF `emissiveTexture`: the emission is the factor's spectrum filtered by the
+    /// texel's (see [`crate::scene::SpectralScene::emission_at`]).
+    pub emissive_texture: Option<texture::TextureRef>,
 }
 
 /// Beer–Lambert absorption inside a closed glass: after `distance` scene units inside,

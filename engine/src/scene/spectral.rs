@@ -9,7 +9,7 @@ use super::{Material, MaterialKind, PunctualKind, PunctualLight, Scene};
 use crate::geometry::{Accel, SurfaceHit, TriData, triangle_normal};
 use crate::lights::{Light, LightKind, LightSet};
 use crate::sampling::one_minus_cos;
-use crate::spectral::{BinGrid, Role, Spectrum, Transport};
+use crate::spectral::{BinGrid, Role, Spectrum, Transport, spd};
 
 /// Surface behaviour with per-bin data.
 #[derive(Clone, Debug)]
@@ -41,6 +41,8 @@ pub struct SMaterial {
     pub absorption: Option<Vec<f32>>,
     /// A base-colour texture, with the factor it multiplies (linear RGB).
     pub texture: Option<(TextureRef, [f32; 3])>,
+    /// An emissive texture: it filters `emission` per hit.
+    pub emission_texture: Option<TextureRef>,
 }
 
 impl SMaterial {
@@ -207,6 +209,32 @@ impl SpectralScene {
         scratch
     }
 
+    /// The emitted radiance (N bins) of `mat` at `hit`: its emission, filtered per bin by
+    /// the emissive texel's spectrum (the texel's RGB upsampled like a reflectance, so a
+    /// white texel leaves the emission as it is and glTF's factor × texture holds for
+    /// every colour the upsampling reproduces). None when it emits nothing.
+    pub fn emission_at<'a>(
+        &'a self,
+        mat: &'a SMaterial,
+        hit: &SurfaceHit,
+        scratch: &'a mut Vec<f32>,
+    ) -> Option<&'a [f32]> {
+        let e = mat.emission.as_deref()?;
+        let (Some(tex), Some(uv)) = (
+            &mat.emission_texture,
+            self.triangle_uvs.get(hit.prim as usize),
+        ) else {
+            return Some(e);
+        };
+        let (b1, b2) = hit.bary;
+        let texel = tex.sample(uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2);
+        texel_filter(&self.grid, texel, scratch);
+        for (s, v) in scratch.iter_mut().zip(e) {
+            *s *= v;
+        }
+        Some(scratch)
+    }
+
     pub fn material(&self, hit: &SurfaceHit) -> &SMaterial {
         &self.materials[hit.material as usize]
     }
@@ -272,6 +300,7 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
             (Some(t), MaterialKind::Diffuse { .. }) => Some((t.clone(), [1.0; 3])),
             _ => None,
         },
+        emission_texture: m.emissive_texture.clone(),
         absorption: m.volume.as_ref().map(|v| {
             grid.project(&Spectrum::Reflectance(v.color), Role::Reflectance)
                 .into_iter()
@@ -279,6 +308,52 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
                 .collect()
         }),
     }
+}
+
+/// A linear RGB texel as a per-bin filter in [0, 1] (the RGB itself on the RGB grid).
+fn texel_filter(grid: &BinGrid, texel: [f32; 3], out: &mut Vec<f32>) {
+    let rgb = texel.map(|c| c.clamp(0.0, 1.0));
+    out.resize(grid.len(), 0.0);
+    match grid.smits() {
+        Some(smits) => {
+            smits.decode_into(rgb, out);
+            for v in out.iter_mut() {
+                *v = v.clamp(0.0, 1.0);
+            }
+        }
+        None => out.copy_from_slice(&rgb),
+    }
+}
+
+/// Texels averaged per emissive triangle (a stratified 16 × 16 pattern over it).
+const EMITTER_TEXEL_SAMPLES: usize = 16;
+
+/// What an emissive triangle emits as a light: its material's emission, filtered by the
+/// emissive texture averaged over the triangle. Photons and light samples follow the
+/// texture triangle by triangle; the camera sees every texel ([`SpectralScene::emission_at`]).
+fn triangle_emission(
+    e: &[f32],
+    texture: Option<&TextureRef>,
+    uv: Option<&[glam::Vec2; 3]>,
+    grid: &BinGrid,
+) -> Vec<f32> {
+    let (Some(tex), Some(uv)) = (texture, uv) else {
+        return e.to_vec();
+    };
+    let n = EMITTER_TEXEL_SAMPLES;
+    let mut mean = vec![0.0f32; grid.len()];
+    let mut filter = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let u = [(i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32];
+            let (b1, b2) = crate::sampling::uniform_triangle(u);
+            let at = uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2;
+            texel_filter(grid, tex.sample(at), &mut filter);
+            spd::add_scaled(&mut mean, &filter, 1.0 / (n * n) as f32);
+        }
+    }
+    spd::mul_assign(&mut mean, e);
+    mean
 }
 
 /// The triangles with their precomputed data, an area light per emissive triangle of
@@ -312,11 +387,14 @@ fn triangles_and_area_lights(
             diffuse_area += area as f64;
         }
         if let Some(e) = &mat.emission {
-            let y = grid.to_xyz(e)[1];
+            let uv =
+                (scene.triangle_uvs.len() == scene.triangles.len()).then(|| &scene.triangle_uvs[i]);
+            let e = triangle_emission(e, mat.emission_texture.as_ref(), uv, grid);
+            let y = grid.to_xyz(&e)[1];
             if area > 0.0 && y > 0.0 {
                 lights.push(Light {
                     kind: LightKind::Area { tri: i as u32 },
-                    spectrum: e.clone(),
+                    spectrum: e,
                     power: (y * std::f64::consts::PI * area as f64) as f32,
                 });
             }
