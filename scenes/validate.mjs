@@ -11,7 +11,7 @@ const require = createRequire(import.meta.url);
 const validator = require("gltf-validator");
 const here = dirname(fileURLToPath(import.meta.url));
 const files = [];
-for (const dir of [here, join(here, "fixtures"), join(here, "blender")]) {
+for (const dir of [here, join(here, "fixtures"), join(here, "blender"), join(here, "khronos")]) {
   for (const f of readdirSync(dir)) {
     if (f.endsWith(".gltf") || f.endsWith(".glb")) files.push(join(dir, f));
   }

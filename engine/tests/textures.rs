@@ -249,3 +249,62 @@ fn an_emissive_texture_is_seen_texel_by_texel_and_lights_by_its_mean() {
         assert!((ratio - 1.0).abs() < 0.05, "{storage:?}: {ratio}");
     }
 }
+
+#[test]
+fn khronos_box_textured_renders_its_embedded_texture_on_a_rough_metal() {
+    // Issue #11: Khronos BoxTextured (glTF-Embedded: buffer and a palette PNG as data
+    // URIs). Its material sets only a base-colour texture, so glTF's defaults make it a
+    // rough metal (metallic 1, roughness 1) whose F0 is the texture; it has no light (the
+    // default sky, with a warning) and no camera (the bounds are framed, with a warning).
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes/khronos/BoxTextured.gltf");
+    let s = scene::load(&path).unwrap();
+    assert!(s.materials[0].base_color_texture.is_some());
+    assert!(matches!(
+        s.materials[0].kind,
+        scene::MaterialKind::Mirror { roughness, .. } if roughness == 1.0
+    ));
+    assert!(
+        s.warnings.iter().any(|w| w.contains("no light")),
+        "{:?}",
+        s.warnings
+    );
+    assert!(
+        s.warnings.iter().any(|w| w.contains("no camera")),
+        "{:?}",
+        s.warnings
+    );
+    let settings = RenderSettings {
+        width: 64,
+        height: 64,
+        photons_per_pass: 1_000,
+        ..RenderSettings::preview()
+    };
+    let mut r = RenderSession::new(&s, settings).unwrap();
+    for _ in 0..32 {
+        r.run_pass().unwrap();
+    }
+    let img = r.image();
+    // Mean colour of a 5×5 patch: the logo's sky (blue) above its hills (green).
+    let patch = |cx: u32, cy: u32| {
+        let mut m = [0.0f32; 3];
+        for y in cy - 2..=cy + 2 {
+            for x in cx - 2..=cx + 2 {
+                for (c, v) in m.iter_mut().zip(img.get(x, y)) {
+                    *c += v / 25.0;
+                }
+            }
+        }
+        m
+    };
+    let (sky, hills) = (patch(32, 20), patch(32, 48));
+    println!("logo sky {sky:?}, hills {hills:?}");
+    assert!(
+        sky[2] > 1.3 * sky[1] && sky[2] > 1.5 * sky[0],
+        "blue: {sky:?}"
+    );
+    assert!(
+        hills[1] > 1.3 * hills[2] && hills[1] > 1.3 * hills[0],
+        "green: {hills:?}"
+    );
+}

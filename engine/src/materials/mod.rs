@@ -191,6 +191,39 @@ pub fn russian_roulette_metal(
     russian_roulette_by(t, |i| microfacet::schlick(reflectance[i], cos) * weight, u)
 }
 
+/// A camera path's metal bounce: `t` *= Schlick(F0 = `reflectance`, `cos`) · `weight`
+/// per bin, kept as a weight (a path that survived roulette on every coloured bounce
+/// would show a rough metal as black-or-sky noise), then [`roulette_when_faint`].
+pub fn attenuate_metal(t: &mut [f32], reflectance: &[f32], cos: f32, weight: f32, u: f32) -> bool {
+    for (v, r) in t.iter_mut().zip(reflectance) {
+        *v *= microfacet::schlick(*r, cos) * weight;
+    }
+    roulette_when_faint(t, u)
+}
+
+/// Throughput below which a camera path plays Russian roulette.
+pub const FAINT: f32 = 0.25;
+
+/// Russian roulette on a path's own size: a path whose largest bin is below [`FAINT`]
+/// survives with probability max/FAINT and is scaled back up to FAINT (unbiased); a
+/// brighter one always continues. Paths through many lossy bounces end; a bright path is
+/// never cut short.
+pub fn roulette_when_faint(t: &mut [f32], u: f32) -> bool {
+    let m = crate::spectral::spd::max(t);
+    if !(m > 0.0) {
+        return false;
+    }
+    if m >= FAINT {
+        return true;
+    }
+    let p = m / FAINT;
+    if u >= p {
+        return false;
+    }
+    crate::spectral::spd::scale(t, 1.0 / p);
+    true
+}
+
 /// Russian roulette on a scalar weight (≤ 1 for the microfacet models): survives with
 /// probability min(1, w) and keeps the path's size.
 pub fn russian_roulette_scalar(t: &mut [f32], w: f32, u: f32) -> bool {

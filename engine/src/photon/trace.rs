@@ -194,6 +194,7 @@ fn trace_one(
                     let Some((dir, cos, w)) = metal_bounce(*alpha, path.dir, nf, ns, u) else {
                         break;
                     };
+                    let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut texel);
                     if !russian_roulette_metal(&mut path.flux, reflectance, cos, w, rng.next_f32())
                     {
                         break;

@@ -8,8 +8,7 @@ use glam::Vec3;
 use crate::geometry::SurfaceHit;
 use crate::materials::microfacet::{Frame, Ggx, reflection_lobe, schlick};
 use crate::materials::{
-    dielectric_bounce, fresnel_dielectric, metal_bounce, russian_roulette_metal,
-    russian_roulette_scalar,
+    attenuate_metal, dielectric_bounce, fresnel_dielectric, metal_bounce, roulette_when_faint,
 };
 use crate::photon::trace::micro_sample;
 use crate::photon::{IrradianceCache, Kernel, PhotonMap};
@@ -154,7 +153,8 @@ impl Gather<'_> {
                 }
                 kind => {
                     self.rough_highlight(kind, &hit, dir, rng, s, out);
-                    match self.specular_bounce(kind, &hit, dir, &mut s.throughput, rng) {
+                    let (t, texel) = (&mut s.throughput, &mut s.refl);
+                    match self.specular_bounce(kind, &hit, dir, t, texel, rng) {
                         Some((o, d)) => (origin, dir) = (o, d),
                         None => return,
                     }
@@ -205,9 +205,13 @@ impl Gather<'_> {
         let l = lights.spectrum(sample.light);
         match kind {
             SurfaceKind::Mirror { reflectance, .. } => {
+                let mut buf = std::mem::take(&mut s.refl);
+                let mat = self.scene.material(hit);
+                let reflectance = self.scene.reflectance_at(mat, reflectance, hit, &mut buf);
                 for (i, o) in out.iter_mut().enumerate() {
                     *o += s.throughput[i] * l[i] * scale * schlick(reflectance[i], cos_h);
                 }
+                s.refl = buf;
             }
             SurfaceKind::Dielectric { eta, .. } => {
                 for (i, o) in out.iter_mut().enumerate() {
@@ -317,7 +321,7 @@ impl Gather<'_> {
                     spd::scale(out, std::f32::consts::FRAC_1_PI);
                     return;
                 }
-                kind => match self.specular_bounce(kind, &hit, dir, t, rng) {
+                kind => match self.specular_bounce(kind, &hit, dir, t, texel, rng) {
                     Some((o, d)) => (origin, dir) = (o, d),
                     None => return,
                 },
@@ -334,14 +338,16 @@ impl Gather<'_> {
     ///   from: radiance/η² is what is conserved across an interface, so radiance in glass
     ///   seen from air is divided by n² (pbrt-v4's `ft /= Sqr(etap)` in radiance mode).
     ///   Photons carry flux, which is not scaled (importance transport).
-    /// - At a mirror, Russian roulette on the reflectance (as the photon tracer does)
-    ///   keeps the throughput's size, so paths end by absorption rather than by a cap.
+    /// - At a metal (Fresnel · microfacet weight) and at rough glass (its weight) the
+    ///   throughput is scaled, and a path that has grown faint plays Russian roulette
+    ///   ([`roulette_when_faint`]), so paths end by absorption rather than by a cap.
     fn specular_bounce(
         &self,
         kind: &SurfaceKind,
         hit: &SurfaceHit,
         dir: Vec3,
         t: &mut [f32],
+        texel: &mut Vec<f32>,
         rng: &mut Rng,
     ) -> Option<(Vec3, Vec3)> {
         let (p, n, nf, ns) = (hit.p, hit.n, hit.nf, hit.ns);
@@ -350,7 +356,9 @@ impl Gather<'_> {
             SurfaceKind::Mirror { reflectance, alpha } => {
                 let u = micro_sample(*alpha, rng);
                 let (d, cos, w) = metal_bounce(*alpha, dir, nf, ns, u)?;
-                if !russian_roulette_metal(t, reflectance, cos, w, rng.next_f32()) {
+                let mat = self.scene.material(hit);
+                let reflectance = self.scene.reflectance_at(mat, reflectance, hit, texel);
+                if !attenuate_metal(t, reflectance, cos, w, rng.next_f32()) {
                     return None;
                 }
                 (self.scene.accel.offset(p, nf, d), d)
@@ -373,7 +381,7 @@ impl Gather<'_> {
                 };
                 let u = micro_sample(*alpha, rng);
                 let (ev, w) = dielectric_bounce(*alpha, dir, n, ns, e, u, rng.next_f32())?;
-                if w < 1.0 && !russian_roulette_scalar(t, w, rng.next_f32()) {
+                if w < 1.0 && !roulette_when_faint_after(t, w, rng.next_f32()) {
                     return None;
                 }
                 if ev.transmitted {
@@ -416,6 +424,12 @@ pub fn camera_dir(c: &crate::scene::Camera, x: f32, y: f32, width: u32, height: 
     let sx = (2.0 * x / width as f32 - 1.0) * tan_y * aspect;
     let sy = (1.0 - 2.0 * y / height as f32) * tan_y;
     (c.forward + c.right * sx + c.up * sy).normalize()
+}
+
+/// `t` *= `w`, then [`roulette_when_faint`].
+fn roulette_when_faint_after(t: &mut [f32], w: f32, u: f32) -> bool {
+    spd::scale(t, w);
+    roulette_when_faint(t, u)
 }
 
 /// A bin drawn with probability ∝ `t`.

@@ -297,7 +297,16 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
                     reflectance: Spectrum::Reflectance(rgb),
                 },
             ) => Some((t.clone(), rgb.map(|c| c as f32))),
-            (Some(t), MaterialKind::Diffuse { .. }) => Some((t.clone(), [1.0; 3])),
+            (
+                Some(t),
+                MaterialKind::Mirror {
+                    reflectance: Spectrum::Reflectance(rgb),
+                    ..
+                },
+            ) => Some((t.clone(), rgb.map(|c| c as f32))),
+            (Some(t), MaterialKind::Diffuse { .. } | MaterialKind::Mirror { .. }) => {
+                Some((t.clone(), [1.0; 3]))
+            }
             _ => None,
         },
         emission_texture: m.emissive_texture.clone(),
