@@ -44,6 +44,39 @@ fn photons_traced(bencher: Bencher, bins: usize) {
         });
 }
 
+/// The cost of a texture in the photon pass: Blender's textured-glass fixture (an
+/// image-textured cube, a glass sphere, a floor, under a Sun) traced with its texture and
+/// with the texture removed (the factor alone), 20 bins compact.
+#[divan::bench(args = [true, false], sample_count = 10)]
+fn photons_traced_textured(bencher: Bencher, textured: bool) {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes/blender/textured-glass.glb");
+    let mut scene = prismap_engine::scene::load(&path).unwrap();
+    if !textured {
+        for m in &mut scene.materials {
+            m.base_color_texture = None;
+        }
+    }
+    let scene = SpectralScene::new(&scene, BinGrid::with_bins(20).unwrap());
+    let settings = PhotonSettings {
+        photons: 50_000,
+        record: Storage::Compact.record(),
+        max_bounces: 1024,
+        dispersion_split: 4,
+        caustic_map: true,
+        max_map_bytes: usize::MAX,
+    };
+    let cancel = AtomicBool::new(false);
+    bencher
+        .counter(ItemsCount::new(settings.photons))
+        .bench(|| {
+            trace_photons(&scene, &settings, 1, 1, &cancel)
+                .unwrap()
+                .global
+                .len()
+        });
+}
+
 /// Radius queries on the global map (one thread), full vs compact at 20 bins.
 #[divan::bench(args = [Storage::Full, Storage::Compact], sample_count = 10)]
 fn gather_queries(bencher: Bencher, storage: Storage) {

@@ -142,6 +142,21 @@ impl LightSet {
         photons: usize,
         rng: &mut Rng,
     ) -> Option<Emitted> {
+        let mut flux = Vec::new();
+        let (origin, dir) = self.emit_into(tris, accel, photons, rng, &mut flux)?;
+        Some(Emitted { origin, dir, flux })
+    }
+
+    /// [`Self::emit`] with the flux written into `flux` (resized to the bins; no
+    /// allocation once it has been): returns the photon's origin and direction.
+    pub fn emit_into(
+        &self,
+        tris: &[TriData],
+        accel: &Accel,
+        photons: usize,
+        rng: &mut Rng,
+        flux: &mut Vec<f32>,
+    ) -> Option<(Vec3, Vec3)> {
         use std::f32::consts::PI;
         if self.lights.is_empty() {
             return None;
@@ -193,9 +208,10 @@ impl LightSet {
                 (origin, dir, 4.0 * PI * PI * radius * radius)
             }
         };
-        let mut flux = light.spectrum.clone();
-        spd::scale(&mut flux, weight / (pmf * photons as f32));
-        Some(Emitted { origin, dir, flux })
+        flux.clear();
+        flux.extend_from_slice(&light.spectrum);
+        spd::scale(flux, weight / (pmf * photons as f32));
+        Some((origin, dir))
     }
 
     /// Irradiance (N bins) at `p` (facing normal `nf`) from one light sample with a shadow

@@ -32,6 +32,9 @@ pub struct IrradianceCache {
     values: Vec<f32>,
     /// Farthest a lookup searches for a point on its surface.
     r_lookup: f32,
+    /// Each point by its cell (points are one per cell, see [`thin_out`]).
+    cells: CellMap,
+    inv_cell: f32,
 }
 
 /// The photons irradiance is estimated at: every `every`-th (the map is in kd order, so
@@ -41,37 +44,62 @@ pub struct IrradianceCache {
 /// one cell apart instead of following the photons; final gathering averages what it
 /// reads over a hemisphere, so it never needed them closer. Deterministic: the first
 /// photon of each cell in map order is kept.
-fn thin_out(map: &PhotonMap, every: usize, cell: f32) -> Vec<usize> {
-    let inv = if cell > 0.0 && cell.is_finite() {
-        1.0 / cell
-    } else {
-        0.0
-    };
-    let mut seen = std::collections::HashSet::new();
+fn thin_out(map: &PhotonMap, every: usize, inv_cell: f32) -> Vec<usize> {
+    let mut seen = CellMap::default();
     (0..map.len())
         .step_by(every.max(1))
         .filter(|&i| {
-            let p = map.positions()[i];
             let n = oct_decode(map.normal_code(i));
-            let a = n.abs();
-            let axis = if a.x >= a.y && a.x >= a.z {
-                0
-            } else if a.y >= a.z {
-                1
-            } else {
-                2
-            };
-            let side = (axis * 2 + (n[axis] < 0.0) as usize) as u8;
-            let key = (
-                (p[0] * inv).floor() as i32,
-                (p[1] * inv).floor() as i32,
-                (p[2] * inv).floor() as i32,
-                side,
-            );
-            seen.insert(key)
+            let key = cell_key(Vec3::from_array(map.positions()[i]), n, inv_cell);
+            seen.insert(key, 0).is_none()
         })
         .collect()
 }
+
+/// A cube of the cell grid and a surface orientation class (dominant axis and sign of
+/// the normal, 0–5).
+type CellKey = (i32, i32, i32, u8);
+
+fn cell_key(p: Vec3, n: Vec3, inv_cell: f32) -> CellKey {
+    let a = n.abs();
+    let axis = if a.x >= a.y && a.x >= a.z {
+        0
+    } else if a.y >= a.z {
+        1
+    } else {
+        2
+    };
+    let side = (axis * 2 + (n[axis] < 0.0) as usize) as u8;
+    let q = |v: f32| (v * inv_cell).floor().clamp(-1e9, 1e9) as i32;
+    (q(p.x), q(p.y), q(p.z), side)
+}
+
+/// A multiply–rotate hash for cell keys (the keys are small integers: SipHash's
+/// protection against chosen keys buys nothing here and costs a lookup's worth of time).
+#[derive(Default)]
+struct CellHasher(u64);
+
+impl std::hash::Hasher for CellHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u8(&mut self, v: u8) {
+        self.write_u64(v as u64);
+    }
+    fn write_i32(&mut self, v: i32) {
+        self.write_u64(v as u32 as u64);
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(23) ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+type CellMap = std::collections::HashMap<CellKey, u32, std::hash::BuildHasherDefault<CellHasher>>;
 
 impl IrradianceCache {
     /// Estimates irradiance at every `every`-th photon of `map` with `kernel` (radii below
@@ -95,7 +123,12 @@ impl IrradianceCache {
         // typical k-nearest radius spans √k spacings.
         let spacing =
             kernel.r_start / (kernel.k.max(1) as f32).sqrt() * (every.max(1) as f32).sqrt();
-        let ids = thin_out(map, every, spacing);
+        let inv_cell = if spacing > 0.0 && spacing.is_finite() {
+            1.0 / spacing
+        } else {
+            0.0
+        };
+        let ids = thin_out(map, every, inv_cell);
         // Chunks of neighbouring points (the map is in kd order): each estimate's search
         // starts at the previous one's radius, reset per chunk so that the result never
         // depends on the thread count.
@@ -128,8 +161,11 @@ impl IrradianceCache {
         let mut positions = Vec::with_capacity(order.len());
         let mut normals = Vec::with_capacity(order.len());
         let mut values = Vec::with_capacity(order.len() * stride);
+        let mut cells = CellMap::default();
         for &o in &order {
             let (pos, normal, value) = &estimates[o as usize];
+            let key = cell_key(Vec3::from_array(*pos), oct_decode(*normal), inv_cell);
+            cells.insert(key, positions.len() as u32);
             positions.push(*pos);
             normals.push(*normal);
             values.extend_from_slice(value);
@@ -142,6 +178,8 @@ impl IrradianceCache {
             stride,
             values,
             r_lookup,
+            cells,
+            inv_cell,
         }
     }
 
@@ -153,9 +191,13 @@ impl IrradianceCache {
         self.positions.is_empty()
     }
 
-    /// Bytes of the points, their normals and values, and the kd axis bytes.
+    /// Bytes of the points, their normals and values, the kd axis bytes and the cell map.
     pub fn memory_bytes(&self) -> usize {
-        self.positions.len() * 12 + self.normals.len() * 4 + self.values.len() * 4 + self.axes.len()
+        self.positions.len() * 12
+            + self.normals.len() * 4
+            + self.values.len() * 4
+            + self.axes.len()
+            + self.cells.capacity() * (size_of::<(CellKey, u32)>() + 1)
     }
 
     /// The irradiance (N bins) of the nearest point on the surface and side `n` faces at
@@ -175,12 +217,21 @@ impl IrradianceCache {
             h * h <= (1.0 / 64.0) * d.length_squared() + 1e-12
                 && oct_within(self.normals[i], n, super::map::MIN_NORMAL_COS)
         };
-        // One nearest-neighbour search out to the cap: it visits the near side first, so
-        // its radius drops to the nearest point's distance almost at once.
-        let r2 = self.r_lookup * self.r_lookup;
-        kdtree::k_nearest_within(&self.positions, &self.axes, p, 1, r2, accept, found);
-        let Some(&(_, i)) = found.first() else {
-            return false;
+        // The point in the query's own cell, if it has one on the query's surface: within
+        // a cell's diagonal of it, which is as close as the points' spacing resolves (a
+        // hash probe instead of a tree search for most rays). Else one nearest-neighbour
+        // search out to the cap: it visits the near side first, so its radius drops to the
+        // nearest point's distance almost at once.
+        let i = match self.cells.get(&cell_key(p, n, self.inv_cell)) {
+            Some(&i) if accept(i as usize) => i,
+            _ => {
+                let r2 = self.r_lookup * self.r_lookup;
+                kdtree::k_nearest_within(&self.positions, &self.axes, p, 1, r2, accept, found);
+                match found.first() {
+                    Some(&(_, i)) => i,
+                    None => return false,
+                }
+            }
         };
         let v = &self.values[i as usize * self.stride..(i as usize + 1) * self.stride];
         match (self.record, grid.smits()) {

@@ -92,16 +92,11 @@ pub fn trace_photons(
             let mut splits = 0;
             let start = c * CHUNK;
             let end = (start + CHUNK).min(settings.photons);
+            let mut scratch = TraceScratch::default();
             for i in start..end {
                 let mut rng = Rng::stream(seed, pass, i as u64, Purpose::Photon);
-                splits += trace_one(
-                    scene,
-                    settings,
-                    caustic,
-                    &mut rng,
-                    &mut global,
-                    &mut caustics,
-                );
+                let maps = (&mut global, &mut caustics);
+                splits += trace_one(scene, settings, caustic, &mut rng, maps, &mut scratch);
             }
             let bytes = global.memory_bytes() + caustics.memory_bytes();
             if used.fetch_add(bytes, Ordering::Relaxed) + bytes > settings.max_map_bytes {
@@ -138,34 +133,49 @@ pub fn trace_photons(
     })
 }
 
+/// What a chunk's photons reuse: the path stack, spare flux buffers (a path's buffer
+/// goes back here when it ends, and split pieces come from here) and a texel buffer. No
+/// allocation per photon once the chunk's first few photons have sized them.
+#[derive(Default)]
+struct TraceScratch {
+    stack: Vec<Path>,
+    spare: Vec<Vec<f32>>,
+    texel: Vec<f32>,
+}
+
 /// Emits and traces one photon; returns the number of dispersive splits.
 fn trace_one(
     scene: &SpectralScene,
     settings: &PhotonSettings,
     caustic: bool,
     rng: &mut Rng,
-    global: &mut PhotonBatch,
-    caustics: &mut PhotonBatch,
+    (global, caustics): (&mut PhotonBatch, &mut PhotonBatch),
+    scratch: &mut TraceScratch,
 ) -> u64 {
-    let Some(e) = scene
-        .lights
-        .emit(&scene.tris, &scene.accel, settings.photons, rng)
+    let TraceScratch {
+        stack,
+        spare,
+        texel,
+    } = scratch;
+    let mut flux = spare.pop().unwrap_or_default();
+    let Some((origin, dir)) =
+        scene
+            .lights
+            .emit_into(&scene.tris, &scene.accel, settings.photons, rng, &mut flux)
     else {
+        spare.push(flux);
         return 0;
     };
-    let first = Path {
-        origin: e.origin,
-        dir: e.dir,
-        flux: e.flux,
+    stack.push(Path {
+        origin,
+        dir,
+        flux,
         depth: 0,
         diffuse_seen: false,
         specular_seen: false,
-    };
+    });
     let grid = &scene.grid;
     let mut splits = 0;
-    // A textured surface's reflectance at a hit (allocated only by textured scenes).
-    let mut texel = Vec::new();
-    let mut stack = vec![first];
     while let Some(mut path) = stack.pop() {
         while path.depth < settings.max_bounces {
             let Some(hit) = scene.intersect(path.origin, path.dir) else {
@@ -181,7 +191,7 @@ fn trace_one(
                     if caustic && path.specular_seen && !path.diffuse_seen {
                         caustics.push(grid, p, nf, &path.flux);
                     }
-                    let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut texel);
+                    let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
                     if !russian_roulette(&mut path.flux, reflectance, rng.next_f32()) {
                         break;
                     }
@@ -194,7 +204,7 @@ fn trace_one(
                     let Some((dir, cos, w)) = metal_bounce(*alpha, path.dir, nf, ns, u) else {
                         break;
                     };
-                    let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut texel);
+                    let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
                     if !russian_roulette_metal(&mut path.flux, reflectance, cos, w, rng.next_f32())
                     {
                         break;
@@ -213,7 +223,8 @@ fn trace_one(
                         // Split here; the pieces continue from this same hit.
                         splits += 1;
                         path.depth -= 1;
-                        for flux in split_dispersive(&path.flux, settings.dispersion_split, rng) {
+                        let s = settings.dispersion_split;
+                        split_dispersive_with(&path.flux, s, rng, spare, |flux| {
                             stack.push(Path {
                                 origin: path.origin,
                                 dir: path.dir,
@@ -221,8 +232,8 @@ fn trace_one(
                                 depth: path.depth,
                                 diffuse_seen: path.diffuse_seen,
                                 specular_seen: path.specular_seen,
-                            });
-                        }
+                            })
+                        });
                         break;
                     }
                     let e = eta[single.unwrap_or(0)];
@@ -241,6 +252,7 @@ fn trace_one(
                 }
             }
         }
+        spare.push(path.flux);
     }
     splits
 }
@@ -254,37 +266,52 @@ pub(crate) fn micro_sample(alpha: f32, rng: &mut Rng) -> [f32; 2] {
 
 /// Splits a multi-bin flux into single-bin fluxes (see the module docs).
 pub fn split_dispersive(flux: &[f32], max_split: usize, rng: &mut Rng) -> Vec<Vec<f32>> {
+    let mut pieces = Vec::new();
+    split_dispersive_with(flux, max_split, rng, &mut Vec::new(), |p| pieces.push(p));
+    pieces
+}
+
+/// [`split_dispersive`], each piece handed to `emit` in a buffer taken from `spare`
+/// (allocated only when `spare` is empty).
+fn split_dispersive_with(
+    flux: &[f32],
+    max_split: usize,
+    rng: &mut Rng,
+    spare: &mut Vec<Vec<f32>>,
+    mut emit: impl FnMut(Vec<f32>),
+) {
     let n = flux.len();
-    let nonzero: Vec<usize> = (0..n).filter(|&i| flux[i] > 0.0).collect();
+    let mut piece = |bin: usize, value: f32| {
+        let mut f = spare.pop().unwrap_or_default();
+        f.clear();
+        f.resize(n, 0.0);
+        f[bin] = value;
+        emit(f);
+    };
+    let nonzero = flux.iter().filter(|&&v| v > 0.0).count();
     let s = max_split.max(1);
-    if nonzero.len() <= s {
-        return nonzero
-            .into_iter()
-            .map(|i| {
-                let mut f = vec![0.0; n];
-                f[i] = flux[i];
-                f
-            })
-            .collect();
+    if nonzero <= s {
+        for (i, &v) in flux.iter().enumerate() {
+            if v > 0.0 {
+                piece(i, v);
+            }
+        }
+        return;
     }
     let total: f64 = flux.iter().map(|&v| v.max(0.0) as f64).sum();
-    let mut cdf = Vec::with_capacity(n);
-    let mut acc = 0.0f64;
-    for &v in flux {
-        acc += v.max(0.0) as f64;
-        cdf.push(acc);
-    }
     let xi = rng.next_f32() as f64;
     let share = (total / s as f64) as f32;
-    (0..s)
-        .map(|k| {
-            let target = (k as f64 + xi) / s as f64 * total;
-            let bin = cdf.partition_point(|&c| c <= target).min(n - 1);
-            let mut f = vec![0.0; n];
-            f[bin] = share;
-            f
-        })
-        .collect()
+    // The strata's targets rise with k: one walk up the CDF finds every bin.
+    let mut bin = 0usize;
+    let mut upto = flux[0].max(0.0) as f64;
+    for k in 0..s {
+        let target = (k as f64 + xi) / s as f64 * total;
+        while upto <= target && bin + 1 < n {
+            bin += 1;
+            upto += flux[bin].max(0.0) as f64;
+        }
+        piece(bin, share);
+    }
 }
 
 #[cfg(test)]
