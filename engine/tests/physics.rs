@@ -660,3 +660,79 @@ fn rough_glass_in_a_furnace_keeps_its_equilibrium() {
         }
     }
 }
+
+#[test]
+fn a_bin_spreads_over_its_own_width_so_the_rainbow_is_continuous() {
+    // Issue #13: a bin stands for every wavelength in it. Refracting each photon at a
+    // wavelength drawn within its bin spreads the bin's photons over the angle its
+    // wavelengths span, so at 4 bins the prism's caustic is one band, not 4 spots: along
+    // the dispersion direction, each bin's photons cover about the distance between
+    // neighbouring bins' centres (a uniform spread of width w has a standard deviation of
+    // w/√12 ≈ 0.29 w; one spot per bin — every photon of a bin refracted alike — would
+    // be the beam's own width, a small fraction).
+    use prismap_engine::photon::{PhotonSettings, trace_photons};
+    use prismap_engine::scene::{SpectralScene, load_builtin};
+    use prismap_engine::spectral::BinGrid;
+    let bins = 4;
+    let grid = BinGrid::with_bins(bins).unwrap();
+    let scene = SpectralScene::new(&load_builtin("prism").unwrap(), grid.clone());
+    let settings = PhotonSettings {
+        photons: 200_000,
+        record: Storage::Compact.record(),
+        max_bounces: 1024,
+        dispersion_split: 16,
+        caustic_map: true,
+        max_map_bytes: usize::MAX,
+    };
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let maps = trace_photons(&scene, &settings, 1, 1, &cancel).unwrap();
+    let caustic = maps.caustic.expect("the prism makes a caustic map");
+    // Per bin: the photons on the floor's rainbow (spikes of that bin).
+    let mut per_bin: Vec<Vec<Vec3>> = vec![Vec::new(); bins];
+    let mut flux = vec![0.0; bins];
+    for i in 0..caustic.len() {
+        caustic.flux_of(&grid, i, &mut flux);
+        let lit: Vec<usize> = (0..bins).filter(|&b| flux[b] > 0.0).collect();
+        if let [b] = lit[..] {
+            per_bin[b].push(Vec3::from_array(caustic.positions()[i]));
+        }
+    }
+    // The band's brightest part: each bin's median position, and the dispersion axis
+    // from the first bin's to the last's.
+    let median = |v: &[Vec3], axis: usize| {
+        let mut c: Vec<f32> = v.iter().map(|p| p[axis]).collect();
+        c.sort_by(f32::total_cmp);
+        c[c.len() / 2]
+    };
+    let centre = |b: usize| {
+        Vec3::new(
+            median(&per_bin[b], 0),
+            median(&per_bin[b], 1),
+            median(&per_bin[b], 2),
+        )
+    };
+    let axis = (centre(bins - 1) - centre(0)).normalize();
+    let spacing = (centre(bins - 1) - centre(0)).length() / (bins - 1) as f32;
+    for (b, photons) in per_bin.iter().enumerate() {
+        assert!(photons.len() > 500, "bin {b}: {} photons", photons.len());
+        // The spread of the bin's photons near its centre (within two spacings: the
+        // floor's scattered photons far away do not count).
+        let c = centre(b);
+        let along: Vec<f32> = photons
+            .iter()
+            .map(|p| (*p - c).dot(axis))
+            .filter(|d| d.abs() < 2.0 * spacing)
+            .collect();
+        let mean = along.iter().sum::<f32>() / along.len() as f32;
+        let sd =
+            (along.iter().map(|d| (d - mean).powi(2)).sum::<f32>() / along.len() as f32).sqrt();
+        // Glass disperses blue more than red: compare with this bin's own neighbours.
+        let local = (centre((b + 1).min(bins - 1)) - centre(b.saturating_sub(1))).length()
+            / ((b + 1).min(bins - 1) - b.saturating_sub(1)) as f32;
+        println!("bin {b}: spread {sd:.4} along the rainbow, neighbours {local:.4} apart");
+        assert!(
+            sd > 0.2 * local,
+            "bin {b}: photons spread {sd} for neighbours {local} apart (a spot, not a band)"
+        );
+    }
+}

@@ -23,7 +23,7 @@ use crate::materials::{
     russian_roulette_scalar,
 };
 use crate::sampling::{Purpose, Rng, cosine_hemisphere};
-use crate::scene::{SpectralScene, SurfaceKind};
+use crate::scene::{SpectralScene, SurfaceKind, eta_in_bin};
 use crate::spectral::spd;
 
 /// Photons traced per work item (fixed, so results do not depend on the thread count).
@@ -67,6 +67,9 @@ struct Path {
     depth: u32,
     diffuse_seen: bool,
     specular_seen: bool,
+    /// Where within its bin a single-bin photon's wavelength lies (drawn at its first
+    /// dispersive interface, kept after; see [`crate::scene::spectral::eta_in_bin`]).
+    lambda_u: Option<f32>,
 }
 
 /// Traces `settings.photons` photons for pass `pass`.
@@ -173,6 +176,7 @@ fn trace_one(
         depth: 0,
         diffuse_seen: false,
         specular_seen: false,
+        lambda_u: None,
     });
     let grid = &scene.grid;
     let mut splits = 0;
@@ -215,6 +219,7 @@ fn trace_one(
                 }
                 SurfaceKind::Dielectric {
                     eta,
+                    eta_edges,
                     dispersive,
                     alpha,
                 } => {
@@ -232,11 +237,18 @@ fn trace_one(
                                 depth: path.depth,
                                 diffuse_seen: path.diffuse_seen,
                                 specular_seen: path.specular_seen,
+                                lambda_u: None,
                             })
                         });
                         break;
                     }
-                    let e = eta[single.unwrap_or(0)];
+                    let bin = single.unwrap_or(0);
+                    let e = if *dispersive {
+                        let u = *path.lambda_u.get_or_insert_with(|| rng.next_f32());
+                        eta_in_bin(eta, eta_edges, bin, u)
+                    } else {
+                        eta[bin]
+                    };
                     let u = micro_sample(*alpha, rng);
                     let Some((ev, w)) =
                         dielectric_bounce(*alpha, path.dir, n, ns, e, u, rng.next_f32())

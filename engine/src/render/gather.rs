@@ -13,7 +13,7 @@ use crate::materials::{
 use crate::photon::trace::micro_sample;
 use crate::photon::{IrradianceCache, Kernel, PhotonMap};
 use crate::sampling::{Rng, cosine_hemisphere};
-use crate::scene::{SpectralScene, SurfaceKind};
+use crate::scene::{SpectralScene, SurfaceKind, eta_in_bin};
 use crate::spectral::spd;
 
 /// What one pass's gather needs.
@@ -117,6 +117,8 @@ impl Gather<'_> {
     ) {
         let scene = self.scene;
         s.throughput.fill(1.0);
+        // Where within its bin the path's wavelength lies, once dispersive glass picks it.
+        let mut lambda_u = None;
         for _ in 0..self.max_bounces {
             let Some(hit) = scene.intersect(origin, dir) else {
                 // An escaping path sees the sky, if the scene has one.
@@ -154,7 +156,7 @@ impl Gather<'_> {
                 kind => {
                     self.rough_highlight(kind, &hit, dir, rng, s, out);
                     let (t, texel) = (&mut s.throughput, &mut s.refl);
-                    match self.specular_bounce(kind, &hit, dir, t, texel, rng) {
+                    match self.specular_bounce(kind, &hit, dir, t, texel, &mut lambda_u, rng) {
                         Some((o, d)) => (origin, dir) = (o, d),
                         None => return,
                     }
@@ -293,6 +295,7 @@ impl Gather<'_> {
         } = b;
         out.fill(0.0);
         t.fill(1.0);
+        let mut lambda_u = None;
         for _ in 0..self.max_bounces {
             let Some(hit) = scene.intersect(origin, dir) else {
                 return;
@@ -321,7 +324,7 @@ impl Gather<'_> {
                     spd::scale(out, std::f32::consts::FRAC_1_PI);
                     return;
                 }
-                kind => match self.specular_bounce(kind, &hit, dir, t, texel, rng) {
+                kind => match self.specular_bounce(kind, &hit, dir, t, texel, &mut lambda_u, rng) {
                     Some((o, d)) => (origin, dir) = (o, d),
                     None => return,
                 },
@@ -333,7 +336,8 @@ impl Gather<'_> {
     /// `t` and returns the new ray, or None when the path ends.
     ///
     /// - At dispersive glass one bin is picked ∝ throughput, weight 1/p, so the estimate
-    ///   stays unbiased.
+    ///   stays unbiased, and the path's wavelength is drawn within that bin (once per
+    ///   path: [`eta_in_bin`]).
     /// - A transmitted ray's throughput scales by (ηi/ηt)², ηi on the side the ray comes
     ///   from: radiance/η² is what is conserved across an interface, so radiance in glass
     ///   seen from air is divided by n² (pbrt-v4's `ft /= Sqr(etap)` in radiance mode).
@@ -341,6 +345,7 @@ impl Gather<'_> {
     /// - At a metal (Fresnel · microfacet weight) and at rough glass (its weight) the
     ///   throughput is scaled, and a path that has grown faint plays Russian roulette
     ///   ([`roulette_when_faint`]), so paths end by absorption rather than by a cap.
+    #[allow(clippy::too_many_arguments)]
     fn specular_bounce(
         &self,
         kind: &SurfaceKind,
@@ -348,6 +353,7 @@ impl Gather<'_> {
         dir: Vec3,
         t: &mut [f32],
         texel: &mut Vec<f32>,
+        lambda_u: &mut Option<f32>,
         rng: &mut Rng,
     ) -> Option<(Vec3, Vec3)> {
         let (p, n, nf, ns) = (hit.p, hit.n, hit.nf, hit.ns);
@@ -365,19 +371,26 @@ impl Gather<'_> {
             }
             SurfaceKind::Dielectric {
                 eta,
+                eta_edges,
                 dispersive,
                 alpha,
             } => {
-                let e = match (dispersive, spd::single_nonzero(t)) {
-                    (_, Some(bin)) => eta[bin],
-                    (false, None) => eta[0],
+                let bin = match (dispersive, spd::single_nonzero(t)) {
+                    (_, Some(bin)) => bin,
+                    (false, None) => 0,
                     (true, None) => {
                         let bin = pick_bin(t, rng.next_f32())?;
                         let total = spd::sum(t);
                         t.fill(0.0);
                         t[bin] = total;
-                        eta[bin]
+                        bin
                     }
+                };
+                let e = if *dispersive {
+                    let u = *lambda_u.get_or_insert_with(|| rng.next_f32());
+                    eta_in_bin(eta, eta_edges, bin, u)
+                } else {
+                    eta[bin]
                 };
                 let u = micro_sample(*alpha, rng);
                 let (ev, w) = dielectric_bounce(*alpha, dir, n, ns, e, u, rng.next_f32())?;

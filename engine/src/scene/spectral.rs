@@ -23,10 +23,13 @@ pub enum SurfaceKind {
         reflectance: Vec<f32>,
         alpha: f32,
     },
-    /// `eta[i]`: index in bin i; `dispersive`: whether the bins differ; `alpha`: GGX
-    /// roughness (0: smooth).
+    /// `eta[i]`: index in bin i (at its centre); `dispersive`: whether the bins differ;
+    /// `eta_edges[i]`, `eta_edges[i + 1]`: the index at bin i's edges (dispersive glass
+    /// only: light refracts at a wavelength drawn within its bin, see [`eta_in_bin`]);
+    /// `alpha`: GGX roughness (0: smooth).
     Dielectric {
         eta: Vec<f32>,
+        eta_edges: Vec<f32>,
         dispersive: bool,
         alpha: f32,
     },
@@ -240,6 +243,21 @@ impl SpectralScene {
     }
 }
 
+/// The index of a dispersive glass for light of bin `bin` at the wavelength a fraction
+/// `u` ∈ [0, 1) across the bin (linear between the bin's edges: the index is smooth, a
+/// Sellmeier curve bends by < 1e-5 inside a 20 nm bin). A bin stands for every wavelength
+/// in it: refracting each photon (and camera path) at one drawn within its bin spreads
+/// the bin over its own angular width — a continuous rainbow at any bin count — while
+/// the flux stays in its bin. A path draws `u` once and keeps it through every interface.
+/// Without edges (non-dispersive glass) it is the bin's index.
+#[inline]
+pub fn eta_in_bin(eta: &[f32], eta_edges: &[f32], bin: usize, u: f32) -> f32 {
+    match (eta_edges.get(bin), eta_edges.get(bin + 1)) {
+        (Some(&a), Some(&b)) => a + u * (b - a),
+        _ => eta[bin.min(eta.len() - 1)],
+    }
+}
+
 /// The GGX α of a glTF perceptual roughness (its square); 0 (smooth) below
 /// [`crate::materials::microfacet::SMOOTH_ALPHA`].
 pub fn ggx_alpha(roughness: f32) -> f32 {
@@ -279,8 +297,19 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
                 && grid.len() > 1
                 && ior.is_dispersive()
                 && eta.iter().any(|&e| e != eta[0]);
+            let eta_edges = if dispersive {
+                (0..=grid.len())
+                    .map(|i| {
+                        let (lo, hi) = grid.bin_edges(i.min(grid.len() - 1));
+                        ior.eta(if i < grid.len() { lo } else { hi }) as f32
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            };
             SurfaceKind::Dielectric {
                 eta,
+                eta_edges,
                 dispersive,
                 alpha: ggx_alpha(*roughness),
             }
