@@ -237,3 +237,26 @@ fn the_viewer_renders_with_wgpu_headless() {
         colours.len()
     );
 }
+
+#[test]
+fn the_viewer_starts_on_the_scenes_own_bin_count() {
+    // Issue #13: `prismap view` without --bins picks the bins for the scene ("auto"), and
+    // the panel says so: 100 for the dispersive prism, 8 for the RGB Cornell box.
+    for (scene, want) in [("prism", 100), ("cornell-box", 8)] {
+        let ctx = egui::Context::default();
+        let mut app = ViewerApp::new(&ctx, SceneSource::Builtin(scene.into()), settings(), None);
+        app.keep_auto_bins();
+        assert!(app.auto_bins, "{scene}");
+        assert_eq!(app.settings.bins, want, "{scene}");
+        let mut h = Harness::builder()
+            .with_size(egui::vec2(1400.0, 1000.0))
+            .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app);
+        wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+        assert_eq!(
+            h.state().snapshot.as_ref().unwrap().bins,
+            want,
+            "{scene}: the worker renders at the automatic bin count"
+        );
+        h.get_by_label_contains(&format!("{want} bins:"));
+    }
+}

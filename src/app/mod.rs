@@ -196,6 +196,20 @@ impl ViewerApp {
         &self.source
     }
 
+    /// Marks the bin count as the scene's automatic choice (it already is: the caller set
+    /// it from [`auto_bins`]), so the panel shows "auto" with its reason and a new scene
+    /// picks its own.
+    pub fn keep_auto_bins(&mut self) {
+        let (bins, why) = auto_bins(&self.scene);
+        if bins != self.settings.bins {
+            self.settings.bins = bins;
+            self.auto_bins = true;
+            self.restart();
+        }
+        self.auto_bins = true;
+        self.auto_reason = why;
+    }
+
     /// Restarts rendering with the current scene, camera and settings.
     pub fn restart(&mut self) {
         if self.auto_bins {
@@ -567,6 +581,7 @@ pub fn list_scene_files(dir: &Path) -> Vec<PathBuf> {
 pub fn run_native(
     source: SceneSource,
     settings: RenderSettings,
+    auto_bins: bool,
     capture: Option<Capture>,
     probe: Option<(u32, u32)>,
 ) -> Result<(), String> {
@@ -585,6 +600,9 @@ pub fn run_native(
         options,
         Box::new(move |cc| {
             let mut app = ViewerApp::new(&cc.egui_ctx, source, settings, capture);
+            if auto_bins {
+                app.keep_auto_bins();
+            }
             if let Some(p) = probe {
                 app.set_probe(p);
             }

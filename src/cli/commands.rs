@@ -122,8 +122,9 @@ pub fn view(args: ViewArgs) -> Result<()> {
     // Fail early with the loader's message rather than inside the window.
     let loaded = scene::load_any(&args.scene)?;
     let (width, height) = args.size.unwrap_or_else(|| loaded.image_size(256));
+    let auto_bins = args.bins.is_none();
     let settings = RenderSettings {
-        bins: args.bins,
+        bins: args.bins.unwrap_or_else(|| app::auto_bins(&loaded).0),
         storage: args.storage,
         photons_per_pass: args.photons,
         width,
@@ -146,7 +147,8 @@ pub fn view(args: ViewArgs) -> Result<()> {
         path,
         after_passes: args.after_passes,
     });
-    app::run_native(source, settings, capture, args.probe).map_err(|e| anyhow::anyhow!(e))
+    app::run_native(source, settings, auto_bins, capture, args.probe)
+        .map_err(|e| anyhow::anyhow!(e))
 }
 
 pub fn report(args: ReportArgs) -> Result<()> {

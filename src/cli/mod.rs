@@ -145,8 +145,10 @@ pub struct ViewArgs {
     /// A .gltf/.glb file, or a built-in scene name.
     #[arg(default_value = scene::DEFAULT_SCENE)]
     pub scene: String,
-    #[arg(long, default_value_t = RenderSettings::interactive().bins)]
-    pub bins: usize,
+    /// Wavelength bins (default: chosen for the scene — 100 with dispersive glass, 20 with
+    /// a spectral light, else 8 — as the viewer's "auto")
+    #[arg(long)]
+    pub bins: Option<usize>,
     #[arg(long, default_value = "compact", value_parser = parse_storage)]
     pub storage: Storage,
     #[arg(long, default_value_t = RenderSettings::interactive().photons_per_pass)]
