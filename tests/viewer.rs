@@ -260,3 +260,61 @@ fn the_viewer_starts_on_the_scenes_own_bin_count() {
         h.get_by_label_contains(&format!("{want} bins:"));
     }
 }
+
+#[test]
+fn keyboard_shortcuts_switch_storage_pause_and_open_a_typed_path() {
+    // Issue #13: 1/2/3 switch storage, space pauses and resumes, and Enter in the path
+    // field opens what was typed there.
+    let mut h = harness("cornell-box");
+    h.step();
+    h.key_press(egui::Key::Num3);
+    h.step();
+    assert_eq!(h.state().settings.storage, Storage::Rgb);
+    h.key_press(egui::Key::Num2);
+    h.step();
+    assert_eq!(h.state().settings.storage, Storage::Compact);
+    h.key_press(egui::Key::Space);
+    h.step();
+    assert!(h.state().paused, "space pauses");
+    h.key_press(egui::Key::Space);
+    h.step();
+    assert!(!h.state().paused, "space resumes");
+    // A path typed into the field, then Enter: the scene opens (keys typed there are text,
+    // not shortcuts: the storage stays).
+    let path = format!("{}/scenes/prism.gltf", env!("CARGO_MANIFEST_DIR"));
+    h.get_by_role(egui::accesskit::Role::TextInput).click();
+    h.step();
+    h.get_by_role(egui::accesskit::Role::TextInput)
+        .type_text(&path);
+    h.step();
+    h.key_press(egui::Key::Enter);
+    h.step();
+    h.step();
+    assert_eq!(
+        *h.state().source(),
+        SceneSource::File(path.clone().into()),
+        "Enter opened the typed path"
+    );
+    assert_eq!(h.state().settings.storage, Storage::Compact);
+}
+
+#[test]
+fn the_scene_list_shows_each_scene_once_and_the_fixtures() {
+    // Issue #13: the built-in scenes were listed twice (built in, and as scenes/*.gltf);
+    // the fixtures in subfolders were not listed at all.
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let files = prismap::app::list_scene_files(&dir);
+    let names: Vec<String> = files
+        .iter()
+        .map(|p| p.strip_prefix(&dir).unwrap().display().to_string())
+        .collect();
+    assert!(
+        !names
+            .iter()
+            .any(|n| n == "prism.gltf" || n == "cornell-box.gltf"),
+        "{names:?}"
+    );
+    for want in ["blender/rough-materials.glb", "khronos/BoxTextured.gltf"] {
+        assert!(names.iter().any(|n| n == want), "{want} missing: {names:?}");
+    }
+}

@@ -477,12 +477,53 @@ impl ViewerApp {
         }) {
             self.open(SceneSource::File(p));
         }
+        self.shortcuts(&ctx);
         panels::controls(self, ui);
         panels::statistics(self, ui);
         panels::probe(self, ui);
         panels::image(self, ui);
         self.apply_actions(&ctx);
         self.drive_capture(&ctx);
+    }
+
+    /// Keyboard shortcuts (when no text field has the keyboard): space pauses or resumes,
+    /// R restarts, V resets the view, S saves a PNG, E an EXR, 1 / 2 / 3 switch to full /
+    /// compact / RGB storage, A picks the bins automatically.
+    fn shortcuts(&mut self, ctx: &egui::Context) {
+        if ctx.egui_wants_keyboard_input() {
+            return;
+        }
+        use egui::Key;
+        let pressed = |k: Key| ctx.input(|i| i.key_pressed(k) && i.modifiers.is_none());
+        if pressed(Key::Space) {
+            self.act(Action::SetPaused(!self.paused));
+        }
+        if pressed(Key::R) {
+            self.act(Action::Restart);
+        }
+        if pressed(Key::V) {
+            self.act(Action::ResetView);
+        }
+        if pressed(Key::S) {
+            self.act(Action::Save("png"));
+        }
+        if pressed(Key::E) {
+            self.act(Action::Save("exr"));
+        }
+        for (k, s) in [
+            (Key::Num1, Storage::Full),
+            (Key::Num2, Storage::Compact),
+            (Key::Num3, Storage::Rgb),
+        ] {
+            if pressed(k) && self.settings.storage != s {
+                self.settings.storage = s;
+                self.act(Action::Restart);
+            }
+        }
+        if pressed(Key::A) && !self.auto_bins {
+            self.auto_bins = true;
+            self.act(Action::Restart);
+        }
     }
 
     /// Queues an action for the end of the frame.
@@ -559,8 +600,32 @@ pub fn auto_bins(scene: &Scene) -> (usize, String) {
     }
 }
 
-/// The `.gltf`/`.glb` files in a folder, sorted.
+/// The `.gltf`/`.glb` files in a folder and its subfolders one level down (fixtures,
+/// Blender exports, samples), sorted, without the built-in scenes' own files (the list
+/// shows those once, as built-ins).
 pub fn list_scene_files(dir: &Path) -> Vec<PathBuf> {
+    let builtin = |p: &Path| {
+        p.parent() == Some(dir)
+            && p.file_stem()
+                .and_then(|s| s.to_str())
+                .is_some_and(|s| scene::builtin(s).is_some())
+    };
+    let mut v: Vec<PathBuf> = scene_files_in(dir);
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for sub in rd
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_dir())
+        {
+            v.extend(scene_files_in(&sub));
+        }
+    }
+    v.retain(|p| !builtin(p));
+    v.sort();
+    v
+}
+
+/// The `.gltf`/`.glb` files directly in `dir`.
+fn scene_files_in(dir: &Path) -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
         .map(|rd| {
             rd.filter_map(|e| e.ok().map(|e| e.path()))

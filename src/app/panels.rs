@@ -37,12 +37,18 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         }
                     });
                 ui.horizontal(|ui| {
-                    ui.add(
+                    let field = ui.add(
                         egui::TextEdit::singleline(&mut app.path_input)
                             .hint_text("path/to/scene.gltf")
                             .desired_width(130.0),
                     );
-                    if ui.button("Open").clicked() && !app.path_input.trim().is_empty() {
+                    let entered =
+                        field.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+                    let clicked = ui
+                        .button("Open")
+                        .on_hover_text("Open the .gltf/.glb typed on the left (or press Enter there)")
+                        .clicked();
+                    if (entered || clicked) && !app.path_input.trim().is_empty() {
                         open = Some(SceneSource::File(app.path_input.trim().into()));
                     }
                     if ui.button("Browse…").clicked() {
@@ -57,18 +63,25 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
 
                 ui.label("Storage");
                 ui.horizontal(|ui| {
-                    for s in Storage::ALL {
+                    for (s, (key, tip)) in Storage::ALL.into_iter().zip([
+                        ("1", "Full: every stored photon keeps all N bins (N floats)"),
+                        ("2", "Compact (Lai & Christensen): an RGB triplet, or a lossless (−1, bin, amplitude) spike for a single-wavelength photon — 3 floats at any N"),
+                        ("3", "RGB: the plain RGB renderer, the baseline (no spectra, no dispersion)"),
+                    ]) {
                         restart |= ui
                             .radio_value(&mut app.settings.storage, s, s.name())
+                            .on_hover_text(format!("{tip}  [{key}]"))
                             .changed();
                     }
                 });
                 ui.add_enabled_ui(app.settings.storage != Storage::Rgb, |ui| {
-                    let r = ui.add(
-                        egui::Slider::new(&mut app.settings.bins, 1..=1000)
-                            .logarithmic(true)
-                            .text("Bins"),
-                    );
+                    let r = ui
+                        .add(
+                            egui::Slider::new(&mut app.settings.bins, 1..=1000)
+                                .logarithmic(true)
+                                .text("Bins"),
+                        )
+                        .on_hover_text("Wavelength bins over 360–830 nm: what photons carry and the film stores per pixel");
                     if r.changed() {
                         app.auto_bins = false;
                         restart = true;
@@ -87,7 +100,11 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                                 restart = true;
                             }
                         }
-                        if ui.selectable_label(app.auto_bins, "auto").clicked() {
+                        if ui
+                            .selectable_label(app.auto_bins, "auto")
+                            .on_hover_text("Bins chosen for the scene: 100 with dispersive glass, 20 with a spectral light, else 8  [A]")
+                            .clicked()
+                        {
                             app.auto_bins = true;
                             restart = true;
                         }
@@ -102,12 +119,14 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                             .logarithmic(true)
                             .text("Photons/pass"),
                     )
+                    .on_hover_text("Photons emitted per pass; each pass also shrinks the gather radius a little")
                     .changed();
                 restart |= ui
                     .add(
                         egui::Slider::new(&mut app.settings.final_gather_rays, 0..=64)
                             .text("Final gather"),
                     )
+                    .on_hover_text("Final-gather rays per pixel per pass for indirect light; 0 shows the global photon map directly")
                     .changed();
                 {
                     egui::ComboBox::from_label("Resolution")
@@ -143,24 +162,40 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 ui.separator();
                 ui.horizontal(|ui| {
                     let label = if app.paused { "Resume" } else { "Pause" };
-                    if ui.button(label).clicked() {
+                    if ui.button(label).on_hover_text("[space]").clicked() {
                         app.act(Action::SetPaused(!app.paused));
                     }
-                    if ui.button("Restart").clicked() {
+                    if ui
+                        .button("Restart")
+                        .on_hover_text("Start refining again from one pass  [R]")
+                        .clicked()
+                    {
                         restart = true;
                     }
-                    if ui.button("Reset view").clicked() {
+                    if ui
+                        .button("Reset view")
+                        .on_hover_text("Back to the scene's own camera (drag to orbit, scroll to zoom)  [V]")
+                        .clicked()
+                    {
                         app.act(Action::ResetView);
                     }
                 });
                 ui.horizontal(|ui| {
-                    for ext in ["png", "exr"] {
-                        if ui.button(format!("Save {}", ext.to_uppercase())).clicked() {
+                    for (ext, tip) in [
+                        ("png", "The image as you see it (sRGB, this exposure)  [S]"),
+                        ("exr", "The linear image, unscaled (OpenEXR)  [E]"),
+                    ] {
+                        if ui
+                            .button(format!("Save {}", ext.to_uppercase()))
+                            .on_hover_text(tip)
+                            .clicked()
+                        {
                             app.act(Action::Save(ext));
                         }
                     }
                 });
                 ui.small(format!("into {}/", app.save_dir.display()));
+                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/3 storage · A auto bins");
                 if restart {
                     app.act(Action::Restart);
                 }
