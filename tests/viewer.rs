@@ -318,3 +318,48 @@ fn the_scene_list_shows_each_scene_once_and_the_fixtures() {
         assert!(names.iter().any(|n| n == want), "{want} missing: {names:?}");
     }
 }
+
+#[test]
+fn compare_mode_keeps_a_while_b_switches_storage() {
+    // Issue #13: freeze full storage as "A", switch to compact: the live image and probe
+    // are re-measured, A's image and probe spectrum stay, and the two are compared (PSNR,
+    // ΔE2000); the difference view is drawn from both.
+    let mut h = harness("prism");
+    h.state_mut().set_probe((20, 20));
+    wait_until(&mut h, "two full passes", |a| passes(a) >= 2);
+    h.key_press(egui::Key::F);
+    h.step();
+    let a = h.state().compare.clone().expect("F froze A");
+    assert!(a.label.starts_with("full"), "{}", a.label);
+    let a_probe = a
+        .probes
+        .iter()
+        .find(|p| p.pixel == (20, 20))
+        .expect("A keeps the probe");
+    assert_eq!(a_probe.spectrum.len(), 20);
+    h.key_press(egui::Key::Num2);
+    h.step();
+    assert_eq!(h.state().settings.storage, Storage::Compact);
+    wait_until(&mut h, "two compact passes", |a| {
+        passes(a) >= 2 && a.settings.storage == Storage::Compact
+    });
+    h.step();
+    let app = h.state();
+    // A is unchanged: same image, same probe spectrum.
+    let still = app.compare.as_ref().unwrap();
+    assert!(std::sync::Arc::ptr_eq(&still.image, &a.image));
+    assert_eq!(still.probes, a.probes);
+    let g = app.agreement.expect("B is compared with A");
+    println!("compact against full: {g:?}");
+    assert!(g.psnr_db.is_finite() && g.psnr_db > 10.0, "{g:?}");
+    assert!(app.compare_texture().is_some());
+    h.get_by_label_contains("B against A: PSNR");
+    // The difference view, then leaving compare mode.
+    h.state_mut().compare_view = prismap::app::compare::CompareView::Difference;
+    let ctx = h.ctx.clone();
+    h.state_mut().update_compare(&ctx);
+    assert!(h.state().compare_texture().is_some());
+    h.key_press(egui::Key::F);
+    h.step();
+    assert!(h.state().compare.is_none() && h.state().agreement.is_none());
+}

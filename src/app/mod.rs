@@ -5,6 +5,7 @@
 //! capture), `panels.rs` draws the controls, statistics, memory and probe panels,
 //! `orbit.rs` turns mouse drags into camera moves.
 
+pub mod compare;
 mod orbit;
 mod panels;
 pub use panels::format_bytes;
@@ -44,6 +45,10 @@ pub enum Action {
     Unpin((u32, u32)),
     /// Export the probe at this pixel as CSV.
     ExportProbe((u32, u32)),
+    /// Freeze the shown image and probe spectra as compare mode's "A".
+    Freeze,
+    /// Leave compare mode.
+    Unfreeze,
 }
 
 /// A request to save a screenshot of the window after some passes, then quit.
@@ -51,6 +56,9 @@ pub enum Action {
 pub struct Capture {
     pub path: PathBuf,
     pub after_passes: u64,
+    /// Compare mode first: freeze the image as "A" after the passes, switch to this
+    /// storage, render as many passes again, then take the screenshot.
+    pub compare_with: Option<Storage>,
 }
 
 /// Where the scene came from, for the scene list.
@@ -107,6 +115,16 @@ pub struct ViewerApp {
     /// The probed pixel and up to three pinned ones.
     pub probe: Option<(u32, u32)>,
     pub pinned: Vec<(u32, u32)>,
+    /// Compare mode's frozen "A" (None: not comparing), how it is shown, and how the live
+    /// image agrees with it.
+    pub compare: Option<compare::Frozen>,
+    pub compare_view: compare::CompareView,
+    /// Where A gives way to B, as a fraction of the image's width.
+    pub compare_split: f32,
+    /// The difference view's gain.
+    pub compare_gain: f32,
+    pub agreement: Option<compare::Agreement>,
+    compare_texture: Option<egui::TextureHandle>,
     memory_history: VecDeque<MemorySample>,
     pub status: String,
     pub save_dir: PathBuf,
@@ -166,6 +184,12 @@ impl ViewerApp {
             snapshot: None,
             probe: None,
             pinned: Vec::new(),
+            compare: None,
+            compare_view: compare::CompareView::Split,
+            compare_split: 0.5,
+            compare_gain: 8.0,
+            agreement: None,
+            compare_texture: None,
             memory_history: VecDeque::new(),
             status,
             save_dir: PathBuf::from("screenshots"),
@@ -417,6 +441,67 @@ impl ViewerApp {
             }
         }
         self.shown_tone = (self.exposure, self.tone);
+        self.update_compare(ctx);
+    }
+
+    /// Compare mode's texture (A as displayed, or the difference) and agreement, after a
+    /// new image, exposure, view or gain.
+    pub fn update_compare(&mut self, ctx: &egui::Context) {
+        let (Some(a), Some(s)) = (&self.compare, &self.snapshot) else {
+            self.agreement = None;
+            return;
+        };
+        let (w, h) = (a.image.width as usize, a.image.height as usize);
+        self.agreement = compare::agreement(&a.image, &s.image, self.exposure);
+        let bytes = match self.compare_view {
+            compare::CompareView::Split => Some(tone_map(&a.image, self.exposure, self.tone)),
+            compare::CompareView::Difference => {
+                compare::difference_display(&a.image, &s.image, self.exposure, self.compare_gain)
+            }
+        };
+        let Some(bytes) = bytes else {
+            self.compare_texture = None;
+            return;
+        };
+        let img = egui::ColorImage::from_rgb([w, h], &bytes);
+        match &mut self.compare_texture {
+            Some(t) => t.set(img, egui::TextureOptions::NEAREST),
+            None => {
+                self.compare_texture =
+                    Some(ctx.load_texture("compare", img, egui::TextureOptions::NEAREST))
+            }
+        }
+    }
+
+    pub fn compare_texture(&self) -> Option<&egui::TextureHandle> {
+        self.compare_texture.as_ref()
+    }
+
+    /// Freezes the shown image and its probes' spectra as "A".
+    pub fn freeze(&mut self) {
+        let Some(s) = &self.snapshot else {
+            self.status = "nothing to freeze yet: wait for the first pass".to_string();
+            return;
+        };
+        let storage = self.settings.storage;
+        let bins = if storage == Storage::Rgb {
+            String::new()
+        } else {
+            format!(", {} bins", s.bins)
+        };
+        self.compare = Some(compare::Frozen {
+            label: format!("{}{bins}, {} passes", storage.name(), s.stats.passes),
+            image: s.image.clone(),
+            probes: s
+                .probes
+                .iter()
+                .map(|p| compare::FrozenProbe {
+                    pixel: (p.x, p.y),
+                    wavelengths: s.wavelengths.clone(),
+                    spectrum: p.mean(),
+                })
+                .collect(),
+        });
     }
 
     /// The scripted capture: screenshot once enough passes are shown, then close.
@@ -436,7 +521,22 @@ impl ViewerApp {
             return;
         }
         let passes = self.snapshot.as_ref().map_or(0, |s| s.stats.passes);
-        if !self.capture_requested && passes >= c.after_passes {
+        let current = self
+            .snapshot
+            .as_ref()
+            .is_some_and(|s| s.generation == self.last_restart_generation && !s.preview);
+        if let Some(storage) = c.compare_with
+            && self.compare.is_none()
+        {
+            if current && passes >= c.after_passes {
+                self.freeze();
+                self.settings.storage = storage;
+                self.restart();
+            }
+            ctx.request_repaint();
+            return;
+        }
+        if !self.capture_requested && current && passes >= c.after_passes {
             self.capture_requested = true;
             let path = c.path.clone();
             let done = self.capture_done.clone();
@@ -488,7 +588,8 @@ impl ViewerApp {
 
     /// Keyboard shortcuts (when no text field has the keyboard): space pauses or resumes,
     /// R restarts, V resets the view, S saves a PNG, E an EXR, 1 / 2 / 3 switch to full /
-    /// compact / RGB storage, A picks the bins automatically.
+    /// compact / RGB storage, A picks the bins automatically, F freezes "A" for compare
+    /// mode (and leaves it).
     fn shortcuts(&mut self, ctx: &egui::Context) {
         if ctx.egui_wants_keyboard_input() {
             return;
@@ -519,6 +620,13 @@ impl ViewerApp {
                 self.settings.storage = s;
                 self.act(Action::Restart);
             }
+        }
+        if pressed(Key::F) {
+            self.act(if self.compare.is_some() {
+                Action::Unfreeze
+            } else {
+                Action::Freeze
+            });
         }
         if pressed(Key::A) && !self.auto_bins {
             self.auto_bins = true;
@@ -553,6 +661,15 @@ impl ViewerApp {
                 Action::SetProbe(p) => self.set_probe(p),
                 Action::PinProbe => self.pin_probe(),
                 Action::Unpin(p) => self.unpin(p),
+                Action::Freeze => {
+                    self.freeze();
+                    self.update_compare(ctx);
+                }
+                Action::Unfreeze => {
+                    self.compare = None;
+                    self.compare_texture = None;
+                    self.agreement = None;
+                }
                 Action::ExportProbe(p) => {
                     self.status = match panels::export_probe_csv(self, p) {
                         Ok(path) => format!("saved {}", path.display()),

@@ -195,7 +195,9 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     }
                 });
                 ui.small(format!("into {}/", app.save_dir.display()));
-                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/3 storage · A auto bins");
+                ui.separator();
+                compare_controls(app, ui);
+                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/3 storage · A auto bins · F freeze A");
                 if restart {
                     app.act(Action::Restart);
                 }
@@ -208,6 +210,81 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 }
             });
         });
+}
+
+/// Compare mode: freeze "A", then choose how A and the live B are shown.
+fn compare_controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
+    use super::compare::CompareView;
+    ui.label("Compare");
+    let Some(a) = &app.compare else {
+        if ui
+            .button("Freeze as A")
+            .on_hover_text("Keep this image and its probe spectra as \"A\"; then change storage or bins and compare the live render \"B\" with it  [F]")
+            .clicked()
+        {
+            app.act(Action::Freeze);
+        }
+        return;
+    };
+    let label = a.label.clone();
+    ui.horizontal(|ui| {
+        ui.small(format!("A: {label}"));
+        if ui
+            .small_button("clear")
+            .on_hover_text("Leave compare mode  [F]")
+            .clicked()
+        {
+            app.act(Action::Unfreeze);
+        }
+    });
+    let mut changed = false;
+    ui.horizontal(|ui| {
+        changed |= ui
+            .radio_value(&mut app.compare_view, CompareView::Split, "split")
+            .on_hover_text("A left of the line, B right of it")
+            .changed();
+        changed |= ui
+            .radio_value(&mut app.compare_view, CompareView::Difference, "difference")
+            .on_hover_text("|A − B| as displayed, times the gain")
+            .changed();
+    });
+    match app.compare_view {
+        CompareView::Split => {
+            ui.add(egui::Slider::new(&mut app.compare_split, 0.0..=1.0).text("split"));
+        }
+        CompareView::Difference => {
+            changed |= ui
+                .add(
+                    egui::Slider::new(&mut app.compare_gain, 1.0..=256.0)
+                        .logarithmic(true)
+                        .text("× gain"),
+                )
+                .changed();
+        }
+    }
+    if changed {
+        app.update_compare(&ui.ctx().clone());
+    }
+    match &app.agreement {
+        Some(g) => {
+            let psnr = if g.psnr_db.is_finite() {
+                format!("{:.2} dB", g.psnr_db)
+            } else {
+                "identical".to_string()
+            };
+            ui.label(format!(
+                "B against A: PSNR {psnr}, ΔE2000 mean {:.2}, p95 {:.2}",
+                g.de_mean, g.de_p95
+            ))
+            .on_hover_text("On the images as displayed, at the current exposure (PSNR: the paper's equation 6)");
+        }
+        None => {
+            ui.colored_label(
+                Color32::LIGHT_RED,
+                "A and B differ in size: pick A's resolution to compare",
+            );
+        }
+    }
 }
 
 /// Bytes as the memory panel shows them ("4.93 MB", "620.1 kB").
@@ -514,6 +591,24 @@ pub fn probe(app: &mut ViewerApp, ui: &mut egui::Ui) {
                                         .color(PROBE_COLOURS[i % 4]),
                                 );
                             }
+                            // Compare mode: the same pixel's spectrum in A, dashed.
+                            if let Some(fp) = app
+                                .compare
+                                .as_ref()
+                                .and_then(|a| a.probes.iter().find(|p| p.pixel == (x, y)))
+                            {
+                                let pts: Vec<[f64; 2]> = fp
+                                    .wavelengths
+                                    .iter()
+                                    .zip(&fp.spectrum)
+                                    .map(|(l, v)| [*l, *v as f64])
+                                    .collect();
+                                plot.line(
+                                    Line::new(format!("A ({x}, {y})"), PlotPoints::from(pts))
+                                        .color(PROBE_COLOURS[i % 4])
+                                        .style(egui_plot::LineStyle::Dashed { length: 6.0 }),
+                                );
+                            }
                         }
                     });
             });
@@ -610,6 +705,48 @@ pub fn image(app: &mut ViewerApp, ui: &mut egui::Ui) {
             if s != 0.0 {
                 app.orbit.zoom_by(s);
                 restart = true;
+            }
+        }
+        // Compare mode: A over the left of the split, or the difference over all of it.
+        if let (Some(a), Some(tex_a)) = (&app.compare, app.compare_texture()) {
+            let r = resp.rect;
+            let painter = ui.painter_at(r);
+            let white = Color32::WHITE;
+            let full_uv = egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0));
+            match app.compare_view {
+                super::compare::CompareView::Split => {
+                    let f = app.compare_split.clamp(0.0, 1.0);
+                    let x = r.min.x + f * r.width();
+                    let left = egui::Rect::from_min_max(r.min, egui::pos2(x, r.max.y));
+                    let uv = egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(f, 1.0));
+                    painter.image(tex_a.id(), left, uv, white);
+                    painter.vline(x, r.y_range(), egui::Stroke::new(1.5, Color32::YELLOW));
+                    let font = egui::FontId::proportional(13.0);
+                    painter.text(
+                        r.min + egui::vec2(6.0, 4.0),
+                        egui::Align2::LEFT_TOP,
+                        format!("A: {}", a.label),
+                        font.clone(),
+                        Color32::YELLOW,
+                    );
+                    painter.text(
+                        egui::pos2(r.max.x - 6.0, r.min.y + 4.0),
+                        egui::Align2::RIGHT_TOP,
+                        "B: live",
+                        font,
+                        Color32::YELLOW,
+                    );
+                }
+                super::compare::CompareView::Difference => {
+                    painter.image(tex_a.id(), r, full_uv, white);
+                    painter.text(
+                        r.min + egui::vec2(6.0, 4.0),
+                        egui::Align2::LEFT_TOP,
+                        format!("|A − B| × {:.0}", app.compare_gain),
+                        egui::FontId::proportional(13.0),
+                        Color32::YELLOW,
+                    );
+                }
             }
         }
         // Mark probes on the image.

@@ -146,6 +146,7 @@ pub fn view(args: ViewArgs) -> Result<()> {
     let capture = args.screenshot.map(|path| app::Capture {
         path,
         after_passes: args.after_passes,
+        compare_with: args.compare_with,
     });
     app::run_native(source, settings, auto_bins, capture, args.probe)
         .map_err(|e| anyhow::anyhow!(e))

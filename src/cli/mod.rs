@@ -161,6 +161,10 @@ pub struct ViewArgs {
     pub screenshot: Option<PathBuf>,
     #[arg(long, default_value_t = 8)]
     pub after_passes: u64,
+    /// With --screenshot: freeze the image as compare mode's "A" after --after-passes,
+    /// switch to this storage, render as many passes again, then take the screenshot.
+    #[arg(long, value_parser = parse_storage, requires = "screenshot")]
+    pub compare_with: Option<Storage>,
     /// Probe this pixel from the start, as X,Y.
     #[arg(long, value_parser = parse_pixel)]
     pub probe: Option<(u32, u32)>,
