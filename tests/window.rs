@@ -44,6 +44,9 @@ fn viewer_window_screenshot_under_xvfb_is_window_sized_and_not_blank() {
             "128x128",
             "--after-passes",
             "2",
+            // Compare mode on the way: A (compact) frozen after 2 passes, B in full.
+            "--compare-with",
+            "full",
             "--screenshot",
         ])
         .arg(&shot)
@@ -65,6 +68,15 @@ fn viewer_window_screenshot_under_xvfb_is_window_sized_and_not_blank() {
         colours.len() > 100,
         "only {} colours: blank window?",
         colours.len()
+    );
+    // Compare mode's split line (yellow) runs down the image.
+    let yellow = img
+        .pixels()
+        .filter(|p| p.0[0] > 230 && p.0[1] > 230 && p.0[2] < 60)
+        .count();
+    assert!(
+        yellow > 100,
+        "{yellow} yellow pixels: no compare split line?"
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
