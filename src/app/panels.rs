@@ -399,6 +399,7 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         .allow_zoom(false)
                         .allow_scroll(false)
                         .legend(egui_plot::Legend::default())
+                        .x_axis_label("seconds since start")
                         .y_axis_label("MB")
                         .show(ui, |p| {
                             let maps: Vec<[f64; 2]> = hist
@@ -556,7 +557,7 @@ pub fn probe(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     } else {
                         "RGB transport: channels at nominal primaries (nm)"
                     })
-                    .y_axis_label("radiance")
+                    .y_axis_label("radiance / bin")
                     .include_x(360.0)
                     .include_x(830.0)
                     .include_y(0.0)
@@ -577,6 +578,32 @@ pub fn probe(app: &mut ViewerApp, ui: &mut egui::Ui) {
                             .stroke(egui::Stroke::NONE);
                             plot.polygon(poly);
                             l += 5.0;
+                        }
+                        // The newest probe as the engine has it: one bar per bin, its width
+                        // the bin's, tinted by its wavelength (hover reads a bin's value).
+                        let primary = app.probe.or_else(|| shown.first().copied());
+                        if spectral
+                            && let Some(p) =
+                                primary.and_then(|px| snap.probes.iter().find(|p| (p.x, p.y) == px))
+                        {
+                            let w = if snap.wavelengths.len() > 1 {
+                                snap.wavelengths[1] - snap.wavelengths[0]
+                            } else {
+                                470.0
+                            };
+                            let bars: Vec<egui_plot::Bar> = snap
+                                .wavelengths
+                                .iter()
+                                .zip(p.mean())
+                                .map(|(l, v)| {
+                                    egui_plot::Bar::new(*l, v as f64)
+                                        .width(w)
+                                        .fill(wavelength_colour(*l).gamma_multiply(0.6))
+                                        .stroke(egui::Stroke::new(0.5, Color32::GRAY))
+                                        .name(format!("{:.0}–{:.0} nm", l - w / 2.0, l + w / 2.0))
+                                })
+                                .collect();
+                            plot.bar_chart(egui_plot::BarChart::new("bins", bars));
                         }
                         for (i, &(x, y)) in shown.iter().enumerate() {
                             if let Some(p) = snap.probes.iter().find(|p| (p.x, p.y) == (x, y)) {
