@@ -363,3 +363,17 @@ fn compare_mode_keeps_a_while_b_switches_storage() {
     h.step();
     assert!(h.state().compare.is_none() && h.state().agreement.is_none());
 }
+
+#[test]
+fn a_file_that_fails_to_open_is_reported_as_an_error() {
+    // Issue #13: errors were grey status text like any other message.
+    let mut h = harness("cornell-box");
+    h.step();
+    h.state_mut()
+        .open(SceneSource::File("no/such/scene.gltf".into()));
+    h.step();
+    let app = h.state();
+    assert!(app.status_is_error, "{}", app.status);
+    assert!(app.status.contains("no/such/scene.gltf"), "{}", app.status);
+    assert_eq!(*app.source(), SceneSource::Builtin("cornell-box".into()));
+}

@@ -127,6 +127,8 @@ pub struct ViewerApp {
     compare_texture: Option<egui::TextureHandle>,
     memory_history: VecDeque<MemorySample>,
     pub status: String,
+    /// Whether `status` reports a failure (shown in red).
+    pub status_is_error: bool,
     pub save_dir: PathBuf,
     capture: Option<Capture>,
     capture_done: Arc<AtomicBool>,
@@ -191,6 +193,7 @@ impl ViewerApp {
             agreement: None,
             compare_texture: None,
             memory_history: VecDeque::new(),
+            status_is_error: !status.is_empty(),
             status,
             save_dir: PathBuf::from("screenshots"),
             capture_requested: false,
@@ -271,10 +274,10 @@ impl ViewerApp {
                 self.source = source;
                 self.probe = None;
                 self.pinned.clear();
-                self.status = format!("opened {}", self.source.label());
+                self.note(format!("opened {}", self.source.label()));
                 self.restart();
             }
-            Err(e) => self.status = e.to_string(),
+            Err(e) => self.fail(e.to_string()),
         }
     }
 
@@ -307,7 +310,7 @@ impl ViewerApp {
             });
         match spawned {
             Ok(_) => self.file_dialog = Some(rx),
-            Err(e) => self.status = format!("cannot open a file dialog: {e}"),
+            Err(e) => self.fail(format!("cannot open a file dialog: {e}")),
         }
     }
 
@@ -320,9 +323,9 @@ impl ViewerApp {
             }
             Ok(None) => {
                 self.file_dialog = None;
-                self.status =
-                    "no file chosen (no file dialog on this system? type a path or drop a file)"
-                        .to_string();
+                self.note(
+                    "no file chosen (no file dialog on this system? type a path or drop a file)",
+                );
             }
             Err(std::sync::mpsc::TryRecvError::Empty) => {}
             Err(std::sync::mpsc::TryRecvError::Disconnected) => self.file_dialog = None,
@@ -392,7 +395,7 @@ impl ViewerApp {
             crate::output::write_exr(&path, &snap.image)
         };
         result.map_err(|e| e.to_string())?;
-        self.status = format!("saved {}", path.display());
+        self.note(format!("saved {}", path.display()));
         Ok(path)
     }
 
@@ -480,7 +483,7 @@ impl ViewerApp {
     /// Freezes the shown image and its probes' spectra as "A".
     pub fn freeze(&mut self) {
         let Some(s) = &self.snapshot else {
-            self.status = "nothing to freeze yet: wait for the first pass".to_string();
+            self.note("nothing to freeze yet: wait for the first pass");
             return;
         };
         let storage = self.settings.storage;
@@ -634,6 +637,18 @@ impl ViewerApp {
         }
     }
 
+    /// Shows `text` in the status line.
+    pub fn note(&mut self, text: impl Into<String>) {
+        self.status = text.into();
+        self.status_is_error = false;
+    }
+
+    /// Shows `text` in the status line as a failure (in red).
+    pub fn fail(&mut self, text: impl Into<String>) {
+        self.status = text.into();
+        self.status_is_error = true;
+    }
+
     /// Queues an action for the end of the frame.
     pub fn act(&mut self, action: Action) {
         if !self.actions.contains(&action) {
@@ -655,7 +670,7 @@ impl ViewerApp {
                 }
                 Action::Save(ext) => {
                     if let Err(e) = self.save(ext) {
-                        self.status = format!("save failed: {e}");
+                        self.fail(format!("save failed: {e}"));
                     }
                 }
                 Action::SetProbe(p) => self.set_probe(p),
@@ -670,12 +685,10 @@ impl ViewerApp {
                     self.compare_texture = None;
                     self.agreement = None;
                 }
-                Action::ExportProbe(p) => {
-                    self.status = match panels::export_probe_csv(self, p) {
-                        Ok(path) => format!("saved {}", path.display()),
-                        Err(e) => format!("CSV export failed: {e}"),
-                    }
-                }
+                Action::ExportProbe(p) => match panels::export_probe_csv(self, p) {
+                    Ok(path) => self.note(format!("saved {}", path.display())),
+                    Err(e) => self.fail(format!("CSV export failed: {e}")),
+                },
             }
         }
     }

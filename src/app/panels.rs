@@ -203,7 +203,11 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 }
                 if !app.status.is_empty() {
                     ui.separator();
-                    ui.label(&app.status);
+                    if app.status_is_error {
+                        ui.colored_label(Color32::LIGHT_RED, &app.status);
+                    } else {
+                        ui.label(&app.status);
+                    }
                 }
                 if let Some(e) = app.render_error() {
                     ui.colored_label(Color32::LIGHT_RED, format!("error: {e}"));
