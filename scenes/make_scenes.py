@@ -55,10 +55,10 @@ class Gltf:
             "attributes": {"POSITION": len(self.doc["accessors"]) - 1}, "material": material}]})
         self._node({"name": name, "mesh": len(self.doc["meshes"]) - 1})
 
-    def camera(self, name, position, forward, up, yfov_deg):
+    def camera(self, name, position, forward, up, yfov_deg, aspect=1.0):
         self.doc.setdefault("cameras", []).append({
             "name": name, "type": "perspective",
-            "perspective": {"yfov": math.radians(yfov_deg), "znear": 1e-3, "aspectRatio": 1.0}})
+            "perspective": {"yfov": math.radians(yfov_deg), "znear": 1e-3, "aspectRatio": aspect}})
         self._node({"name": name, "camera": len(self.doc["cameras"]) - 1,
                     "translation": list(position), "rotation": look_rotation(forward, up)})
 
@@ -178,6 +178,10 @@ def refract(d, n, eta):
     return norm(add(mul(d, eta), mul(n, eta * cos_i - cos_t)))
 
 
+# The prism's camera: (along the beam, to the side, height, vertical field of view °).
+FIRST_LOOK = (1.30, 0.10, 0.36, 40.0)
+
+
 def prism(path):
     side, height, lift = 0.15, 0.20, 0.001
     # Equilateral cross-section in xz, axis vertical.
@@ -287,15 +291,16 @@ def prism(path):
     g.mesh("prism", tris, glass)
     light_pos = sub(centre, mul(d, 0.4))
     g.spot("white spot", light_pos, d, 300.0, 0.4, 0.5)
-    # Camera: behind and above the prism, looking over it at the spectrum on the floor.
+    # Camera (the viewer's first look): from the side away from the light, low over the
+    # floor, framing the glass in the foreground and the whole spectrum beyond it; 16:9.
     rainbow = hits[550.0]
-    target = (0.42 * rainbow[0], 0.0, 0.42 * rainbow[2])
     axis = norm((rainbow[0], 0, rainbow[2]))
     perp = (-axis[2], 0, axis[0])
     if dot(perp, sub(light_pos, (0, 0, 0))) > 0:
         perp = mul(perp, -1)  # look from the side away from the light
-    cam = add(add(mul(axis, -0.15), mul(perp, 0.5)), (0, 0.5, 0))
-    g.camera("camera", cam, sub(target, cam), (0, 1, 0), 40.0)
+    target = add(mul(axis, 0.58 * math.hypot(rainbow[0], rainbow[2])), (0, 0.05, 0))
+    cam = add(add(mul(axis, FIRST_LOOK[0]), mul(perp, FIRST_LOOK[1])), (0, FIRST_LOOK[2], 0))
+    g.camera("camera", cam, sub(target, cam), (0, 1, 0), FIRST_LOOK[3], 16 / 9)
     g.write(path)
 
 

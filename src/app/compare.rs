@@ -103,8 +103,10 @@ mod tests {
     fn a_difference_is_scaled_and_sizes_must_match() {
         let (a, b) = (image(0.2), image(0.21));
         let d = difference_display(&a, &b, 1.0, 10.0).unwrap();
-        // 0.2 and 0.21 encode to sRGB 124 and 127: three levels, ×10.
-        assert_eq!(&d[..3], &[30, 30, 30]);
+        // 0.2 and 0.21 encode to sRGB 124 and 126: two levels, ×10.
+        use crate::spectral::color::srgb8;
+        assert_eq!((srgb8(0.2), srgb8(0.21)), (124, 126));
+        assert_eq!(&d[..3], &[20, 20, 20]);
         assert_eq!(&d[3..], &[0, 0, 0]);
         let g = agreement(&a, &b, 1.0).unwrap();
         assert!(g.psnr_db.is_finite() && g.de_mean > 0.0);
