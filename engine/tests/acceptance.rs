@@ -222,3 +222,25 @@ fn same_seed_gives_the_same_image_on_one_and_two_threads() {
             .all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits))
     );
 }
+
+#[test]
+fn what_is_skipped_is_said_for_the_right_reason() {
+    // Issue #13: at 1 bin the prism was said to have "no dispersive glass".
+    let skipped = |scene: &str, bins: usize| {
+        let s = scene::load_builtin(scene).unwrap();
+        let settings = RenderSettings {
+            bins,
+            width: 8,
+            height: 8,
+            ..RenderSettings::preview()
+        };
+        RenderSession::new(&s, settings)
+            .unwrap()
+            .skipped()
+            .join("; ")
+    };
+    let one = skipped("prism", 1);
+    assert!(one.contains("one bin"), "{one}");
+    assert!(!skipped("prism", 20).contains("dispersion splitting"));
+    assert!(skipped("cornell-box", 20).contains("no dispersive glass"));
+}

@@ -252,6 +252,10 @@ impl RenderSession {
                 Storage::Rgb => {
                     "dispersion splitting: RGB transport uses the 550 nm index".to_string()
                 }
+                _ if self.scene.bins() == 1 => {
+                    "dispersion splitting: one bin holds every wavelength, so glass has one index"
+                        .to_string()
+                }
                 _ => "dispersion splitting: no dispersive glass in the scene".to_string(),
             });
         }
