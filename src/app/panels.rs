@@ -347,7 +347,13 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         if st.r_caustic > 0.0 {
                             row("radius (caustic)", format!("{:.4}", st.r_caustic));
                         }
+                        if let (Some(db), false) = (s.noise_psnr_db, s.preview) {
+                            row("noise left", format!("≈ {db:.1} dB"));
+                        }
                     });
+                if s.noise_psnr_db.is_some() && !s.preview {
+                    ui.small("noise left: PSNR of the image against its own expectation, from the odd against the even passes (noise only, not the bias a radius still carries); +3 dB per doubling of passes");
+                }
                 ui.separator();
                 ui.heading("Memory");
                 let m = &s.memory;

@@ -50,6 +50,9 @@ pub struct Snapshot {
     /// A quick low-resolution first image shown right after a change
     /// (see [`RenderSettings::quick_preview_of`]).
     pub preview: bool,
+    /// The film's noise estimate (PSNR against its own expectation) at the image's
+    /// automatic exposure; None before 2 passes.
+    pub noise_psnr_db: Option<f64>,
 }
 
 /// Nearest-neighbour upscale of a preview to the full image size.
@@ -373,9 +376,16 @@ fn run(
 }
 
 fn snapshot(s: &RenderSession, generation: u64, started: Instant) -> Snapshot {
+    let image = Arc::new(s.image());
+    let exposure = if s.emitter_pixels().len() == image.pixels.len() {
+        crate::output::auto_exposure_skipping(&image, &s.emitter_pixels())
+    } else {
+        crate::output::auto_exposure(&image)
+    };
     Snapshot {
         generation,
-        image: Arc::new(s.image()),
+        noise_psnr_db: s.film().noise_psnr(exposure).filter(|v| v.is_finite()),
+        image,
         stats: s.stats().clone(),
         memory: s.memory(),
         bytes_per_photon: s.bytes_per_photon(),

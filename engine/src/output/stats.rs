@@ -23,6 +23,9 @@ pub struct Stats {
     pub radius: RadiusStats,
     pub seconds: SecondsStats,
     pub nonfinite_pixels: usize,
+    /// The film's own noise estimate at the image's automatic exposure (PSNR of the mean
+    /// against its expectation, [`crate::render::Film::noise_psnr`]); None before 2 passes.
+    pub noise_psnr_db: Option<f64>,
     pub peak_rss_bytes: Option<u64>,
     pub dropped_samples: u64,
     pub skipped: Vec<String>,
@@ -114,6 +117,10 @@ impl Stats {
                 .iter()
                 .filter(|p| p.iter().any(|v| !v.is_finite()))
                 .count(),
+            noise_psnr_db: session
+                .film()
+                .noise_psnr(crate::output::auto_exposure(image))
+                .filter(|v| v.is_finite()),
             peak_rss_bytes: crate::metrics::peak_rss_bytes(),
             dropped_samples: session.film().dropped_samples(),
             skipped: session.skipped(),

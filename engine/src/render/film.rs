@@ -26,6 +26,10 @@ pub struct Film {
     width: u32,
     height: u32,
     sum: Vec<[f64; 3]>,
+    /// The sums of the odd-numbered passes alone (1st, 3rd, …): with `sum` they give two
+    /// independent half-means, whose difference measures the noise left (see
+    /// [`Film::noise_psnr`]).
+    odd: Vec<[f64; 3]>,
     passes: u64,
     /// Samples dropped because they were NaN or infinite.
     dropped: u64,
@@ -37,6 +41,7 @@ impl Film {
             width,
             height,
             sum: vec![[0.0; 3]; (width * height) as usize],
+            odd: vec![[0.0; 3]; (width * height) as usize],
             passes: 0,
             dropped: 0,
         }
@@ -54,10 +59,14 @@ impl Film {
     /// so one bad path never poisons a pixel forever.
     pub fn add_pass(&mut self, pass: &[[f32; 3]]) {
         debug_assert_eq!(pass.len(), self.sum.len());
-        for (s, p) in self.sum.iter_mut().zip(pass) {
+        let odd = self.passes.is_multiple_of(2); // this is pass passes + 1
+        for ((s, o), p) in self.sum.iter_mut().zip(self.odd.iter_mut()).zip(pass) {
             if p.iter().all(|v| v.is_finite()) {
                 for c in 0..3 {
                     s[c] += p[c] as f64;
+                    if odd {
+                        o[c] += p[c] as f64;
+                    }
                 }
             } else {
                 self.dropped += 1;
@@ -81,7 +90,41 @@ impl Film {
     }
 
     pub fn memory_bytes(&self) -> usize {
-        self.sum.len() * size_of::<[f64; 3]>()
+        (self.sum.len() + self.odd.len()) * size_of::<[f64; 3]>()
+    }
+
+    /// An estimate, without a reference, of how far the image is from converged: the PSNR
+    /// (the paper's equation 6, display values at `exposure`) of the mean over passes
+    /// against its own expectation. The odd and the even passes give two independent
+    /// half-means A and B; E|A − B|² = σ²(1/a + 1/b) while the full mean's error is σ²/n,
+    /// so PSNR(mean) ≈ PSNR(A, B) + 10 log₁₀(n (1/a + 1/b)) (+6 dB for halves). It measures
+    /// noise only, not the bias a radius still carries. None before two passes.
+    pub fn noise_psnr(&self, exposure: f32) -> Option<f64> {
+        if self.passes < 2 {
+            return None;
+        }
+        let n = self.passes as f64;
+        let a = n.div_euclid(2.0) + (self.passes % 2) as f64;
+        let b = n - a;
+        let half = |even: bool| Image {
+            width: self.width,
+            height: self.height,
+            pixels: self
+                .sum
+                .iter()
+                .zip(&self.odd)
+                .map(|(s, o)| {
+                    let (v, k) = if even {
+                        ([s[0] - o[0], s[1] - o[1], s[2] - o[2]], b)
+                    } else {
+                        (*o, a)
+                    };
+                    v.map(|x| (x / k) as f32)
+                })
+                .collect(),
+        };
+        let between = crate::metrics::psnr(&half(false), &half(true), exposure).ok()?;
+        Some(between + 10.0 * (n * (1.0 / a + 1.0 / b)).log10())
     }
 }
 
@@ -107,6 +150,53 @@ mod tests {
             let ratio = (p[a] / p[b]) / (v[a] / v[b]);
             assert!((ratio - 1.0).abs() < 1e-6, "channel ratio {a}/{b}: {p:?}");
         }
+    }
+
+    #[test]
+    fn the_noise_estimate_matches_the_error_against_the_truth() {
+        // Passes of a known image plus Gaussian-ish noise: the estimate from the odd and
+        // even halves alone agrees with the PSNR against the known image within 1 dB, and
+        // rises by ~3 dB per doubling of passes.
+        use crate::sampling::{Purpose, Rng};
+        let (w, h) = (64u32, 64u32);
+        let truth: Vec<[f32; 3]> = (0..w * h)
+            .map(|i| [0.2 + 0.1 * (i % 7) as f32 / 7.0, 0.3, 0.15])
+            .collect();
+        let truth_img = Image {
+            width: w,
+            height: h,
+            pixels: truth.clone(),
+        };
+        let mut rng = Rng::stream(1, 0, 0, Purpose::Camera);
+        let mut f = Film::new(w, h);
+        let mut last = None;
+        for pass in 1..=64u64 {
+            let noisy: Vec<[f32; 3]> = truth
+                .iter()
+                .map(|p| {
+                    p.map(|v| {
+                        // Sum of four uniforms: near-Gaussian, zero mean.
+                        let u: f32 = (0..4).map(|_| rng.next_f32() - 0.5).sum();
+                        v * (1.0 + 0.6 * u)
+                    })
+                })
+                .collect();
+            f.add_pass(&noisy);
+            if pass == 16 || pass == 64 {
+                let est = f.noise_psnr(1.0).unwrap();
+                let real = crate::metrics::psnr(&f.develop(), &truth_img, 1.0).unwrap();
+                assert!(
+                    (est - real).abs() < 1.0,
+                    "pass {pass}: estimate {est:.2} dB, real {real:.2} dB"
+                );
+                if let Some(prev) = last {
+                    let gain: f64 = est - prev;
+                    assert!((gain - 6.0).abs() < 1.5, "4× passes: +{gain:.2} dB (≈ 6)");
+                }
+                last = Some(est);
+            }
+        }
+        assert!(Film::new(2, 2).noise_psnr(1.0).is_none());
     }
 
     #[test]
