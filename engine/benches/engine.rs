@@ -21,10 +21,8 @@ fn cornell(bins: usize) -> SpectralScene {
     )
 }
 
-/// Photons emitted and traced (all threads), Cornell box, compact storage.
-#[divan::bench(args = [4, 20, 100], sample_count = 10)]
-fn photons_traced(bencher: Bencher, bins: usize) {
-    let scene = cornell(bins);
+/// Emits and traces 50 000 photons of `scene` (all threads, compact storage) per iteration.
+fn bench_tracing(bencher: Bencher, scene: &SpectralScene) {
     let settings = PhotonSettings {
         photons: 50_000,
         record: Storage::Compact.record(),
@@ -37,11 +35,17 @@ fn photons_traced(bencher: Bencher, bins: usize) {
     bencher
         .counter(ItemsCount::new(settings.photons))
         .bench(|| {
-            trace_photons(&scene, &settings, 1, 1, &cancel)
+            trace_photons(scene, &settings, 1, 1, &cancel)
                 .unwrap()
                 .global
                 .len()
         });
+}
+
+/// Photons emitted and traced (all threads), Cornell box, compact storage.
+#[divan::bench(args = [4, 20, 100], sample_count = 10)]
+fn photons_traced(bencher: Bencher, bins: usize) {
+    bench_tracing(bencher, &cornell(bins));
 }
 
 /// The cost of a texture in the photon pass: Blender's textured-glass fixture (an
@@ -57,24 +61,10 @@ fn photons_traced_textured(bencher: Bencher, textured: bool) {
             m.base_color_texture = None;
         }
     }
-    let scene = SpectralScene::new(&scene, BinGrid::with_bins(20).unwrap());
-    let settings = PhotonSettings {
-        photons: 50_000,
-        record: Storage::Compact.record(),
-        max_bounces: 1024,
-        dispersion_split: 4,
-        caustic_map: true,
-        max_map_bytes: usize::MAX,
-    };
-    let cancel = AtomicBool::new(false);
-    bencher
-        .counter(ItemsCount::new(settings.photons))
-        .bench(|| {
-            trace_photons(&scene, &settings, 1, 1, &cancel)
-                .unwrap()
-                .global
-                .len()
-        });
+    bench_tracing(
+        bencher,
+        &SpectralScene::new(&scene, BinGrid::with_bins(20).unwrap()),
+    );
 }
 
 /// Radius queries on the global map (one thread), full vs compact at 20 bins.

@@ -736,3 +736,32 @@ fn a_bin_spreads_over_its_own_width_so_the_rainbow_is_continuous() {
         );
     }
 }
+
+#[test]
+fn a_metal_mirror_reflects_schlicks_fresnel_of_its_base_colour() {
+    // Issue #11: glTF's metal reflects F = F0 + (1 − F0)(1 − cos θ)⁵ with F0 its base
+    // colour. A smooth mirror of F0 = 0.5 under a uniform sky of radiance 1, seen at
+    // normal incidence, has radiance exactly 0.5; seen at 60° (cos θ = 1/2),
+    // 0.5 + 0.5 · 0.5⁵ = 0.515625. The camera paths scale by F (no roulette above a
+    // quarter), so the figures are exact.
+    for (angle_deg, want) in [(0.0f32, 0.5), (60.0, 0.5 + 0.5 * 0.5f64.powi(5))] {
+        let mut b = Builder::new();
+        b.add(
+            square_facing_minus_z(Vec3::new(0.0, 0.0, 4.0), 40.0),
+            rough_metal(0.5, 0.0),
+            None,
+        );
+        let a = angle_deg.to_radians();
+        let dir = Vec3::new(a.sin(), 0.0, a.cos());
+        let mut scene = b.scene("mirror", Camera::look_at(Vec3::ZERO, dir, Vec3::Y, 0.01));
+        scene.environment = Some(Spectrum::Constant(1.0));
+        for (storage, bins) in [(Storage::Compact, 8), (Storage::Rgb, 3)] {
+            let mean = mean_luminance(&scene, settings(storage, bins, 0, 8, 1_000), 2);
+            println!("{storage:?}, {angle_deg}°: {mean:.5} (Schlick {want:.5})");
+            assert!(
+                (mean - want).abs() < 2e-3,
+                "{storage:?} {angle_deg}°: {mean} vs {want}"
+            );
+        }
+    }
+}

@@ -164,8 +164,8 @@ pub struct RoughEvent {
 /// A rough-glass bounce (Walter et al. 2007 with visible-normal sampling): a microfacet
 /// normal is sampled, then reflection with probability F(ωo·m), else refraction through
 /// it. `d`: incoming direction; `n`: outward geometric normal; `ns`: shading normal
-/// turned to the side `d` comes from; `eta`: the glass's index (air outside). The weight is G2/G1; None when the
-/// sample leaves on the wrong side (lost energy).
+/// turned to the side `d` comes from; `eta`: the glass's index (air outside). The weight
+/// is G2/G1; None when the sample leaves on the wrong side (lost energy).
 pub fn sample_rough_dielectric(
     ggx: Ggx,
     d: Vec3,

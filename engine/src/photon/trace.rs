@@ -23,7 +23,7 @@ use crate::materials::{
     russian_roulette_scalar,
 };
 use crate::sampling::{Purpose, Rng, cosine_hemisphere};
-use crate::scene::{SpectralScene, SurfaceKind, eta_in_bin};
+use crate::scene::{SpectralScene, SurfaceKind, path_eta};
 use crate::spectral::spd;
 
 /// Photons traced per work item (fixed, so results do not depend on the thread count).
@@ -243,12 +243,7 @@ fn trace_one(
                         break;
                     }
                     let bin = single.unwrap_or(0);
-                    let e = if *dispersive {
-                        let u = *path.lambda_u.get_or_insert_with(|| rng.next_f32());
-                        eta_in_bin(eta, eta_edges, bin, u)
-                    } else {
-                        eta[bin]
-                    };
+                    let e = path_eta(eta, eta_edges, *dispersive, bin, &mut path.lambda_u, rng);
                     let u = micro_sample(*alpha, rng);
                     let Some((ev, w)) =
                         dielectric_bounce(*alpha, path.dir, n, ns, e, u, rng.next_f32())

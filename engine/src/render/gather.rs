@@ -13,7 +13,7 @@ use crate::materials::{
 use crate::photon::trace::micro_sample;
 use crate::photon::{IrradianceCache, Kernel, PhotonMap};
 use crate::sampling::{Rng, cosine_hemisphere};
-use crate::scene::{SpectralScene, SurfaceKind, eta_in_bin};
+use crate::scene::{SpectralScene, SurfaceKind, path_eta};
 use crate::spectral::spd;
 
 /// What one pass's gather needs.
@@ -337,7 +337,7 @@ impl Gather<'_> {
     ///
     /// - At dispersive glass one bin is picked ∝ throughput, weight 1/p, so the estimate
     ///   stays unbiased, and the path's wavelength is drawn within that bin (once per
-    ///   path: [`eta_in_bin`]).
+    ///   path: [`path_eta`]).
     /// - A transmitted ray's throughput scales by (ηi/ηt)², ηi on the side the ray comes
     ///   from: radiance/η² is what is conserved across an interface, so radiance in glass
     ///   seen from air is divided by n² (pbrt-v4's `ft /= Sqr(etap)` in radiance mode).
@@ -386,12 +386,7 @@ impl Gather<'_> {
                         bin
                     }
                 };
-                let e = if *dispersive {
-                    let u = *lambda_u.get_or_insert_with(|| rng.next_f32());
-                    eta_in_bin(eta, eta_edges, bin, u)
-                } else {
-                    eta[bin]
-                };
+                let e = path_eta(eta, eta_edges, *dispersive, bin, lambda_u, rng);
                 let u = micro_sample(*alpha, rng);
                 let (ev, w) = dielectric_bounce(*alpha, dir, n, ns, e, u, rng.next_f32())?;
                 if w < 1.0 && !roulette_when_faint_after(t, w, rng.next_f32()) {

@@ -108,9 +108,10 @@ pub struct RenderSession {
 const GLOBAL_CAP_TYPICAL: f32 = 8.0;
 const GLOBAL_CAP_DIAGONAL: f32 = 0.02;
 /// Final-gather rays read irradiance precomputed at every 16th global photon (Christensen
-/// 1999 used a quarter). Measured against every 8th (same passes, references of another
-/// seed): Cornell box 38.91 vs 38.87 dB, prism 34.84 vs 34.85 dB at 16 passes, spot-lit
-/// stage 29.20 vs 29.36 dB at 24 passes — and each pass is cheaper, so per second every
+/// 1999 used a quarter). Measured against every 8th at the same passes: Cornell box 38.91
+/// vs 38.87 dB, prism 34.84 vs 34.85 dB at 16 passes (against same-seed references, which
+/// share those passes' noise), spot-lit stage 29.20 vs 29.36 dB at 24 passes (a reference
+/// of another seed) — and each pass is cheaper, so per second every
 /// 16th is as good or better (spot-lit stage: 29.20 dB at 5.8 s, every 8th ≈ 29.1 dB).
 const PRECOMPUTE_EVERY: usize = 16;
 /// The caustic map's search cap, in typical radii: the radius shrinks where caustic

@@ -13,7 +13,7 @@ pub mod texture;
 pub use crate::geometry::{SurfaceHit, TriData};
 pub use crate::lights::{Light, LightKind, LightSet};
 pub use gltf_load::{load, load_from_slice, parse_spd_csv};
-pub use spectral::{SMaterial, SpectralScene, SurfaceKind, eta_in_bin};
+pub use spectral::{SMaterial, SpectralScene, SurfaceKind, eta_in_bin, path_eta};
 
 use crate::spectral::{IorModel, Spectrum};
 use glam::Vec3;

@@ -258,6 +258,26 @@ pub fn eta_in_bin(eta: &[f32], eta_edges: &[f32], bin: usize, u: f32) -> f32 {
     }
 }
 
+/// The index a path of bin `bin` meets at a glass: within the bin at the path's own
+/// wavelength offset `lambda_u` (drawn at its first dispersive interface, kept after)
+/// for dispersive glass, the bin's index otherwise. Shared by photons and camera paths.
+#[inline]
+pub fn path_eta(
+    eta: &[f32],
+    eta_edges: &[f32],
+    dispersive: bool,
+    bin: usize,
+    lambda_u: &mut Option<f32>,
+    rng: &mut crate::sampling::Rng,
+) -> f32 {
+    if dispersive {
+        let u = *lambda_u.get_or_insert_with(|| rng.next_f32());
+        eta_in_bin(eta, eta_edges, bin, u)
+    } else {
+        eta[bin]
+    }
+}
+
 /// The GGX α of a glTF perceptual roughness (its square); 0 (smooth) below
 /// [`crate::materials::microfacet::SMOOTH_ALPHA`].
 pub fn ggx_alpha(roughness: f32) -> f32 {
