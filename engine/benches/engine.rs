@@ -126,14 +126,14 @@ fn bvh_rays(bencher: Bencher) {
 
 fn fluxes(n: usize) -> (BinGrid, Vec<Vec<f32>>) {
     let g = BinGrid::with_bins(n).unwrap();
-    let light = g.project(&Spectrum::Illuminant([17.0, 12.0, 4.0]), Role::Emission);
+    let light = g.project(&Spectrum::illuminant([17.0, 12.0, 4.0]), Role::Emission);
     let fluxes = [[0.73, 0.73, 0.73], [0.63, 0.065, 0.05], [0.14, 0.45, 0.091]]
         .iter()
         .map(|rgb| {
             let mut f = light.clone();
             spd::mul_assign(
                 &mut f,
-                &g.project(&Spectrum::Reflectance(*rgb), Role::Reflectance),
+                &g.project(&Spectrum::reflectance(*rgb), Role::Reflectance),
             );
             f
         })

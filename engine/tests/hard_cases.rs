@@ -356,9 +356,9 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
         materials: vec![Material {
             name: "m".into(),
             kind: MaterialKind::Diffuse {
-                reflectance: Spectrum::Reflectance([0.5; 3]),
+                reflectance: Spectrum::reflectance([0.5; 3]),
             },
-            emission: Some(Spectrum::Reflectance([-1.0, -1.0, -1.0])),
+            emission: Some(Spectrum::reflectance([-1.0, -1.0, -1.0])),
             volume: None,
             base_color_texture: None,
             emissive_texture: None,

@@ -295,7 +295,7 @@ fn emitter_luminance_is_the_same_at_every_bin_count() {
     let emitters = [
         ("1000 K", Spectrum::blackbody(1000.0, 1.0).unwrap()),
         ("2700 K", Spectrum::blackbody(2700.0, 1.0).unwrap()),
-        ("D65", Spectrum::Illuminant([1.0, 1.0, 1.0])),
+        ("D65", Spectrum::illuminant([1.0, 1.0, 1.0])),
     ];
     for (name, spectrum) in emitters {
         let exact_xyz = spectrum.xyz();
@@ -569,7 +569,7 @@ fn thick_coloured_glass_transmits_exp_minus_sigma_d_per_bin() {
     for bins in [4, 16] {
         let grid = prismap_engine::spectral::BinGrid::with_bins(bins).unwrap();
         let c = grid.project(
-            &Spectrum::Reflectance(color),
+            &Spectrum::reflectance(color),
             prismap_engine::spectral::Role::Reflectance,
         );
         let mut r = RenderSession::new(&scene, settings(Storage::Full, bins, 0, 8, 2_000)).unwrap();
@@ -579,8 +579,12 @@ fn thick_coloured_glass_transmits_exp_minus_sigma_d_per_bin() {
         for (i, (g, ci)) in got.iter().zip(&c).enumerate() {
             let want = (ci.clamp(1e-6, 1.0) as f64).powf(d as f64 / dist) as f32;
             println!("{bins} bins, bin {i}: {g:.5} (exp(−σd) = {want:.5})");
+            // The ray offsets at both faces shorten the path inside by under 1e-4 here
+            // (1e-6 of the scene's diagonal plus 4e-6 of the coordinates, each face): a
+            // relative error of up to σ·1e-4 on top of 1e-3.
+            let sigma = -(ci.clamp(1e-6, 1.0) as f64).ln() as f32 / dist as f32;
             assert!(
-                (g - want).abs() <= 1e-3 * want.max(1e-3),
+                (g - want).abs() <= (1e-3 + sigma * 1e-4) * want.max(1e-3),
                 "bin {i}: {g} vs {want}"
             );
         }

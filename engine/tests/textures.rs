@@ -104,10 +104,10 @@ fn a_textured_quad_seen_head_on_shows_its_texture() {
                 return rgb;
             }
             let mut v = grid.project(
-                &Spectrum::Reflectance(rgb.map(f64::from)),
+                &Spectrum::reflectance(rgb.map(f64::from)),
                 Role::Reflectance,
             );
-            let sky = grid.project(&Spectrum::Illuminant([1.0; 3]), Role::Emission);
+            let sky = grid.project(&Spectrum::illuminant([1.0; 3]), Role::Emission);
             prismap_engine::spectral::spd::mul_assign(&mut v, &sky);
             grid.to_linear_srgb(&v)
         };
@@ -209,10 +209,10 @@ fn an_emissive_texture_is_seen_texel_by_texel_and_lights_by_its_mean() {
                 return [0, 1, 2].map(|c| rgb[c] * factor[c]);
             }
             let mut v = grid.project(
-                &Spectrum::Reflectance(rgb.map(f64::from)),
+                &Spectrum::reflectance(rgb.map(f64::from)),
                 Role::Reflectance,
             );
-            let e = grid.project(&Spectrum::Illuminant(factor.map(f64::from)), Role::Emission);
+            let e = grid.project(&Spectrum::illuminant(factor.map(f64::from)), Role::Emission);
             prismap_engine::spectral::spd::mul_assign(&mut v, &e);
             grid.to_linear_srgb(&v)
         };
@@ -235,7 +235,7 @@ fn an_emissive_texture_is_seen_texel_by_texel_and_lights_by_its_mean() {
             .map(|i| grid.to_xyz(lights.spectrum(i))[1] as f32)
             .sum();
         let untextured = grid.to_xyz(&grid.project(
-            &prismap_engine::spectral::Spectrum::Illuminant(factor.map(f64::from)),
+            &prismap_engine::spectral::Spectrum::illuminant(factor.map(f64::from)),
             prismap_engine::spectral::Role::Emission,
         ))[1] as f32;
         // Both triangles together cover the quad once: twice the mean texel luminance.

@@ -75,6 +75,19 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     }
                 });
                 ui.add_enabled_ui(app.settings.storage != Storage::Rgb, |ui| {
+                    ui.horizontal(|ui| {
+                        ui.label("Colours")
+                            .on_hover_text("How the scene's RGB colours become spectra");
+                        for (u, tip) in [
+                            (crate::spectral::Upsampling::JakobHanika, "Jakob–Hanika 2019: smooth spectra with exactly the colours the scene gives"),
+                            (crate::spectral::Upsampling::Smits, "Smits 1999, as the paper: saturated reds and yellows come out with extra blue"),
+                        ] {
+                            restart |= ui
+                                .radio_value(&mut app.settings.spectra, u, u.label())
+                                .on_hover_text(tip)
+                                .changed();
+                        }
+                    });
                     let r = ui
                         .add(
                             egui::Slider::new(&mut app.settings.bins, 1..=1000)

@@ -126,6 +126,7 @@ pub fn view(args: ViewArgs) -> Result<()> {
     let settings = RenderSettings {
         bins: args.bins.unwrap_or_else(|| app::auto_bins(&loaded).0),
         storage: args.storage,
+        spectra: args.spectra,
         photons_per_pass: args.photons,
         width,
         height,

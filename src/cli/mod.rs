@@ -12,6 +12,7 @@ use clap::{Parser, Subcommand};
 use crate::photon::Storage;
 use crate::render::RenderSettings;
 use crate::scene;
+use crate::spectral::Upsampling;
 
 #[derive(Parser)]
 #[command(
@@ -51,6 +52,10 @@ pub struct RenderArgs {
     /// Photon storage: full (N floats), compact (RGB triplet or spike) or rgb (RGB renderer).
     #[arg(long, value_parser = parse_storage)]
     pub storage: Option<Storage>,
+    /// How scene colours become spectra: jh (Jakob–Hanika 2019, the colour as given) or
+    /// smits (Smits 1999, the paper's).
+    #[arg(long, value_parser = parse_spectra)]
+    pub spectra: Option<Upsampling>,
     /// Photons emitted per pass.
     #[arg(long)]
     pub photons: Option<usize>,
@@ -119,6 +124,7 @@ impl RenderArgs {
         let s = RenderSettings {
             bins: self.bins.unwrap_or(base.bins),
             storage: self.storage.unwrap_or(base.storage),
+            spectra: self.spectra.unwrap_or(base.spectra),
             photons_per_pass: self.photons.unwrap_or(base.photons_per_pass),
             width: self.size.map_or(base.width, |s| s.0),
             height: self.size.map_or(base.height, |s| s.1),
@@ -151,6 +157,9 @@ pub struct ViewArgs {
     pub bins: Option<usize>,
     #[arg(long, default_value = "compact", value_parser = parse_storage)]
     pub storage: Storage,
+    /// How scene colours become spectra: jh (Jakob–Hanika 2019) or smits (Smits 1999).
+    #[arg(long, default_value = "jh", value_parser = parse_spectra)]
+    pub spectra: Upsampling,
     #[arg(long, default_value_t = RenderSettings::interactive().photons_per_pass)]
     pub photons: usize,
     /// Image size WxH (default: 256 rows in the scene camera's shape).
@@ -197,6 +206,13 @@ fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
 
 fn parse_storage(s: &str) -> Result<Storage, String> {
     s.parse()
+}
+
+fn parse_spectra(s: &str) -> Result<Upsampling, String> {
+    Upsampling::ALL
+        .into_iter()
+        .find(|u| u.name().eq_ignore_ascii_case(s.trim()))
+        .ok_or_else(|| format!("spectra '{s}' must be jh or smits"))
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {

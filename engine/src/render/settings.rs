@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::photon::Storage;
-use crate::spectral::{BinGrid, GridError, MAX_BINS, Transport};
+use crate::spectral::{BinGrid, GridError, MAX_BINS, Transport, Upsampling};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RenderSettings {
@@ -38,6 +38,9 @@ pub struct RenderSettings {
     /// Most bytes one pass's photon maps may take; None: a quarter of the machine's RAM.
     /// Photons per pass are lowered to fit (and the stats say so).
     pub photon_budget_bytes: Option<usize>,
+    /// How the scene's RGB colours become spectra (`--spectra`).
+    #[serde(default)]
+    pub spectra: Upsampling,
 }
 
 /// Smallest photon budget accepted.
@@ -70,6 +73,7 @@ impl Default for RenderSettings {
             caustic_k: 24,
             dispersion_split: 4,
             photon_budget_bytes: None,
+            spectra: Upsampling::default(),
         }
     }
 }
@@ -267,7 +271,8 @@ impl RenderSettings {
     pub fn grid(&self) -> Result<BinGrid, GridError> {
         match self.storage.transport() {
             Transport::Rgb => Ok(BinGrid::rgb()),
-            Transport::Spectral => BinGrid::spectral(self.bins, self.lambda_min, self.lambda_max),
+            Transport::Spectral => BinGrid::spectral(self.bins, self.lambda_min, self.lambda_max)
+                .map(|g| g.with_upsampling(self.spectra)),
         }
     }
 }

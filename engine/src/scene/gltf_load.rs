@@ -568,7 +568,7 @@ impl Walk<'_> {
             .iter()
             .any(|&m| out.materials[m as usize].emission.is_some());
         if !emissive && out.lights.is_empty() {
-            out.environment = Some(Spectrum::Illuminant([1.0, 1.0, 1.0]));
+            out.environment = Some(Spectrum::illuminant([1.0, 1.0, 1.0]));
             out.warnings.push(
                 "the scene has no light (no emissive material, no KHR_lights_punctual light): it is lit by a default uniform white (D65) sky of luminance 1, as glTF viewers do; add a light to light it yourself".to_string(),
             );
@@ -645,7 +645,7 @@ fn emission_spectrum(
     element: &str,
 ) -> Result<Spectrum, SceneError> {
     let Some(e) = extras else {
-        return Ok(Spectrum::Illuminant(rgb));
+        return Ok(Spectrum::illuminant(rgb));
     };
     let el = format!("{element}.extras.prismap.emission");
     let set = [
@@ -657,7 +657,7 @@ fn emission_spectrum(
         return Err(ctx.err(el, "give exactly one of blackbody_k, illuminant, spd_csv"));
     }
     // The luminance of the emitter the RGB colour alone would give.
-    let luminance = Spectrum::Illuminant(rgb).luminance();
+    let luminance = Spectrum::illuminant(rgb).luminance();
     let normalise = |shape: Spectrum, what: &str| -> Result<Spectrum, SceneError> {
         let y = shape.luminance();
         if !(y.is_finite() && y > 0.0) {
@@ -671,7 +671,7 @@ fn emission_spectrum(
     }
     if let Some(name) = &e.illuminant {
         let shape = match name.to_ascii_uppercase().as_str() {
-            "D65" => Spectrum::Illuminant([1.0, 1.0, 1.0]),
+            "D65" => Spectrum::illuminant([1.0, 1.0, 1.0]),
             "E" => Spectrum::Constant(1.0),
             "FL11" | "F11" => Spectrum::Table(Arc::new(fl11().clone())),
             _ => {
@@ -790,7 +790,7 @@ fn read_material(
             "{element} '{name}': ior 0 (full reflection) rendered as a metal of its base colour"
         ));
         MaterialKind::Mirror {
-            reflectance: Spectrum::Reflectance(base_rgb),
+            reflectance: Spectrum::reflectance(base_rgb),
             roughness,
         }
     } else if transmission > 0.0 || extras.glass.is_some() {
@@ -808,7 +808,7 @@ fn read_material(
             ));
         }
         MaterialKind::Mirror {
-            reflectance: Spectrum::Reflectance(base_rgb),
+            reflectance: Spectrum::reflectance(base_rgb),
             roughness,
         }
     } else {
@@ -825,7 +825,7 @@ fn read_material(
             }
         }
         MaterialKind::Diffuse {
-            reflectance: Spectrum::Reflectance(base_rgb),
+            reflectance: Spectrum::reflectance(base_rgb),
         }
     };
     let emission = read_emission(m, &extras, ctx, (&element, &name), warnings)?;

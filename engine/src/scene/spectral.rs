@@ -200,15 +200,7 @@ impl SpectralScene {
         let texel = tex.sample(at);
         let rgb = [0, 1, 2].map(|c| (texel[c] * factor[c]).clamp(0.0, 1.0));
         scratch.resize(self.grid.len(), 0.0);
-        match self.grid.smits() {
-            Some(smits) => {
-                smits.decode_into(rgb, scratch);
-                for v in scratch.iter_mut() {
-                    *v = v.clamp(0.0, 1.0);
-                }
-            }
-            None => scratch.copy_from_slice(&rgb),
-        }
+        self.grid.upsample_reflectance_into(rgb, scratch);
         scratch
     }
 
@@ -343,16 +335,16 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
             (
                 Some(t),
                 MaterialKind::Diffuse {
-                    reflectance: Spectrum::Reflectance(rgb),
+                    reflectance: Spectrum::Reflectance(c),
                 },
-            ) => Some((t.clone(), rgb.map(|c| c as f32))),
+            ) => Some((t.clone(), c.rgb.map(|c| c as f32))),
             (
                 Some(t),
                 MaterialKind::Mirror {
-                    reflectance: Spectrum::Reflectance(rgb),
+                    reflectance: Spectrum::Reflectance(c),
                     ..
                 },
-            ) => Some((t.clone(), rgb.map(|c| c as f32))),
+            ) => Some((t.clone(), c.rgb.map(|c| c as f32))),
             (Some(t), MaterialKind::Diffuse { .. } | MaterialKind::Mirror { .. }) => {
                 Some((t.clone(), [1.0; 3]))
             }
@@ -360,7 +352,7 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
         },
         emission_texture: m.emissive_texture.clone(),
         absorption: m.volume.as_ref().map(|v| {
-            grid.project(&Spectrum::Reflectance(v.color), Role::Reflectance)
+            grid.project(&Spectrum::reflectance(v.color), Role::Reflectance)
                 .into_iter()
                 .map(|c| -(c.clamp(1e-6, 1.0) as f64).ln() as f32 / v.distance as f32)
                 .collect()
@@ -370,17 +362,8 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
 
 /// A linear RGB texel as a per-bin filter in [0, 1] (the RGB itself on the RGB grid).
 fn texel_filter(grid: &BinGrid, texel: [f32; 3], out: &mut Vec<f32>) {
-    let rgb = texel.map(|c| c.clamp(0.0, 1.0));
     out.resize(grid.len(), 0.0);
-    match grid.smits() {
-        Some(smits) => {
-            smits.decode_into(rgb, out);
-            for v in out.iter_mut() {
-                *v = v.clamp(0.0, 1.0);
-            }
-        }
-        None => out.copy_from_slice(&rgb),
-    }
+    grid.upsample_reflectance_into(texel, out);
 }
 
 /// Texels averaged per emissive triangle (a stratified 16 × 16 pattern over it).

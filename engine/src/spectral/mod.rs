@@ -5,13 +5,14 @@ pub mod blackbody;
 pub mod color;
 pub mod grid;
 pub mod ior;
+pub mod jakob_hanika;
 pub mod smits;
 pub mod spectrum;
 pub mod tables;
 
 pub use grid::{BinGrid, GridError, MAX_BINS, PAPER_BINS, Transport, spd};
 pub use ior::IorModel;
-pub use spectrum::{Role, Spectrum};
+pub use spectrum::{RgbSpectrum, Role, Spectrum, Upsampling};
 
 #[cfg(test)]
 mod tests;

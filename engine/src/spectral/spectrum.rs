@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use super::blackbody::planck_relative;
 use super::color::xyz_to_linear_srgb;
+use super::jakob_hanika;
 use super::tables::{CMF_RANGE, PiecewiseLinear, cmf, d65, smits_basis};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -23,15 +24,99 @@ pub enum Spectrum {
         luminance: f64,
         scale: f64,
     },
-    /// Smits (1999) upsampling of a linear-sRGB reflectance. Negative channels are
-    /// clamped to 0 first, so the spectrum is never negative.
-    Reflectance([f64; 3]),
-    /// An emitter given as linear-sRGB radiance: the Smits reflectance spectrum of the
-    /// colour times D65 normalised to Y = 1, so that white (1,1,1) is D65 with Y = 1 and
-    /// displays as (1,1,1), as pbrt-v4 does for RGB illuminants.
-    Illuminant([f64; 3]),
+    /// A linear-sRGB reflectance, upsampled as its [`RgbSpectrum::upsampling`] says.
+    /// Build with [`Spectrum::reflectance`].
+    Reflectance(RgbSpectrum),
+    /// An emitter given as linear-sRGB radiance: a bounded spectrum of the colour times
+    /// D65 normalised to Y = 1, so that white (1,1,1) is D65 with Y = 1 and displays as
+    /// (1,1,1), as pbrt-v4 does for RGB illuminants. Build with [`Spectrum::illuminant`].
+    Illuminant(RgbSpectrum),
     /// Another spectrum times a factor.
     Scaled(f64, Arc<Spectrum>),
+}
+
+/// How an RGB colour becomes a spectrum.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Upsampling {
+    /// Jakob & Hanika (2019): smooth, bounded, and the colour it was given (the default).
+    #[default]
+    #[serde(rename = "jh")]
+    JakobHanika,
+    /// Smits (1999), the paper's: piecewise constant; saturated yellows and reds carry
+    /// blue (the Cornell light (17, 12, 4) renders with blue 20 % high).
+    Smits,
+}
+
+impl Upsampling {
+    pub const ALL: [Upsampling; 2] = [Upsampling::JakobHanika, Upsampling::Smits];
+
+    /// The name the command line and the reports use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::JakobHanika => "jh",
+            Self::Smits => "smits",
+        }
+    }
+
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::JakobHanika => "Jakob–Hanika 2019",
+            Self::Smits => "Smits 1999",
+        }
+    }
+}
+
+/// An RGB colour and its spectrum's parameters: the colour as given (negative channels
+/// clamped to 0), and for Jakob–Hanika the sigmoid's coefficients with a scale (1 for
+/// reflectances, which are clamped to [0, 1]; twice the largest channel for emitters).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RgbSpectrum {
+    pub rgb: [f64; 3],
+    pub upsampling: Upsampling,
+    coeffs: [f64; 3],
+    scale: f64,
+}
+
+impl RgbSpectrum {
+    fn reflectance(rgb: [f64; 3], upsampling: Upsampling) -> Self {
+        let rgb = clamp_rgb(rgb);
+        let bounded = rgb.map(|v| v.min(1.0));
+        let coeffs = match upsampling {
+            Upsampling::JakobHanika => jakob_hanika::fit_exactly(bounded),
+            Upsampling::Smits => [0.0; 3],
+        };
+        Self {
+            rgb,
+            upsampling,
+            coeffs,
+            scale: 1.0,
+        }
+    }
+
+    fn illuminant(rgb: [f64; 3], upsampling: Upsampling) -> Self {
+        let rgb = clamp_rgb(rgb);
+        let (scale, coeffs) = match upsampling {
+            Upsampling::JakobHanika => jakob_hanika::illuminant_parts(rgb),
+            Upsampling::Smits => (1.0, [0.0; 3]),
+        };
+        Self {
+            rgb,
+            upsampling,
+            coeffs,
+            scale,
+        }
+    }
+
+    /// The bounded (reflectance-like) part at `l`: the sigmoid times its scale, or Smits.
+    fn eval(&self, l: f64) -> f64 {
+        match self.upsampling {
+            Upsampling::JakobHanika => self.scale * jakob_hanika::eval(self.coeffs, l),
+            Upsampling::Smits => smits_eval(self.rgb, l),
+        }
+    }
 }
 
 /// What a spectrum describes, which decides its colour in the RGB baseline renderer.
@@ -114,6 +199,35 @@ pub fn xyz_of(f: impl Fn(f64) -> f64) -> [f64; 3] {
 }
 
 impl Spectrum {
+    /// A linear-sRGB reflectance, upsampled by Jakob–Hanika (see [`Spectrum::upsampled`]).
+    pub fn reflectance(rgb: [f64; 3]) -> Self {
+        Self::Reflectance(RgbSpectrum::reflectance(rgb, Upsampling::JakobHanika))
+    }
+
+    /// A linear-sRGB emitter, upsampled by Jakob–Hanika (see [`Spectrum::upsampled`]).
+    pub fn illuminant(rgb: [f64; 3]) -> Self {
+        Self::Illuminant(RgbSpectrum::illuminant(rgb, Upsampling::JakobHanika))
+    }
+
+    /// This spectrum with its RGB colours upsampled by `u` (unchanged when they already
+    /// are, or when it has none).
+    pub fn upsampled(&self, u: Upsampling) -> std::borrow::Cow<'_, Spectrum> {
+        use std::borrow::Cow;
+        match self {
+            Self::Reflectance(c) if c.upsampling != u => {
+                Cow::Owned(Self::Reflectance(RgbSpectrum::reflectance(c.rgb, u)))
+            }
+            Self::Illuminant(c) if c.upsampling != u => {
+                Cow::Owned(Self::Illuminant(RgbSpectrum::illuminant(c.rgb, u)))
+            }
+            Self::Scaled(k, s) => match s.upsampled(u) {
+                Cow::Borrowed(_) => Cow::Borrowed(self),
+                Cow::Owned(inner) => Cow::Owned(Self::Scaled(*k, Arc::new(inner))),
+            },
+            _ => Cow::Borrowed(self),
+        }
+    }
+
     /// A blackbody of the given luminance; rejects T ≤ 0, NaN, and temperatures too low
     /// to emit measurable visible light.
     pub fn blackbody(kelvin: f64, luminance: f64) -> Result<Self, SpectrumError> {
@@ -147,8 +261,8 @@ impl Spectrum {
                 }
             }
             Self::Blackbody { kelvin, scale, .. } => planck_relative(lambda_nm, *kelvin) * scale,
-            Self::Reflectance(rgb) => smits_eval(*rgb, lambda_nm),
-            Self::Illuminant(rgb) => smits_eval(*rgb, lambda_nm) * d65().eval(lambda_nm) / d65_y(),
+            Self::Reflectance(c) => c.eval(lambda_nm),
+            Self::Illuminant(c) => c.eval(lambda_nm) * d65().eval(lambda_nm) / d65_y(),
             Self::Scaled(k, s) => k * s.eval(lambda_nm),
         }
     }
@@ -184,7 +298,7 @@ impl Spectrum {
     /// channels (out of gamut) are clamped to 0.
     pub fn to_rgb_renderer(&self, role: Role) -> [f64; 3] {
         match (self, role) {
-            (Self::Reflectance(rgb), _) | (Self::Illuminant(rgb), _) => clamp_rgb(*rgb),
+            (Self::Reflectance(c), _) | (Self::Illuminant(c), _) => c.rgb,
             (Self::Constant(c), Role::Reflectance) => clamp_rgb([*c; 3]),
             (Self::Scaled(k, s), _) => s.to_rgb_renderer(role).map(|v| v * k),
             (_, Role::Emission) => clamp_rgb(xyz_to_linear_srgb(self.xyz())),

@@ -2,7 +2,7 @@
 
 use super::color::xyz_to_linear_srgb;
 use super::smits::{BranchSums, branch};
-use super::spectrum::{Role, Spectrum, xyz_of};
+use super::spectrum::{Role, Spectrum, Upsampling, xyz_of};
 use super::tables::{d65, fl11};
 use super::{BinGrid, spd};
 use std::sync::Arc;
@@ -21,7 +21,7 @@ fn d65_is_srgb_white() {
     // The same through bins: a fine grid reproduces it, and so does a coarse one for Y.
     for n in [4, 100, 1000] {
         let g = BinGrid::with_bins(n).unwrap();
-        let v = g.project(&Spectrum::Illuminant([1.0, 1.0, 1.0]), Role::Emission);
+        let v = g.project(&Spectrum::illuminant([1.0, 1.0, 1.0]), Role::Emission);
         let rgb = g.to_linear_srgb(&v);
         if n >= 100 {
             for c in rgb {
@@ -86,7 +86,7 @@ fn smits_reflectance_round_trips_in_colour() {
     // Smits' spectra are designed for reflectances: under D65 they come back close to the
     // RGB they were made from.
     let g = BinGrid::with_bins(471).unwrap();
-    let d = g.project(&Spectrum::Illuminant([1.0, 1.0, 1.0]), Role::Emission);
+    let d = g.project(&Spectrum::illuminant([1.0, 1.0, 1.0]), Role::Emission);
     for rgb in [
         [0.73, 0.73, 0.73],
         [0.63, 0.065, 0.05],
@@ -95,7 +95,7 @@ fn smits_reflectance_round_trips_in_colour() {
         [1.0, 1.0, 1.0],
         [0.0, 0.0, 0.0],
     ] {
-        let mut v = g.project(&Spectrum::Reflectance(rgb), Role::Reflectance);
+        let mut v = g.project(&Spectrum::reflectance(rgb), Role::Reflectance);
         assert!(v.iter().all(|x| *x >= 0.0 && x.is_finite()));
         spd::mul_assign(&mut v, &d);
         let back = g.to_linear_srgb(&v);
@@ -116,7 +116,7 @@ fn smits_never_negative_for_any_input() {
         [0.0, 1.0, 0.0],
     ];
     for rgb in cases {
-        let v = g.project(&Spectrum::Reflectance(rgb), Role::Reflectance);
+        let v = g.project(&Spectrum::reflectance(rgb), Role::Reflectance);
         assert!(
             v.iter().all(|x| x.is_finite() && *x >= 0.0),
             "{rgb:?}: {v:?}"
@@ -126,7 +126,7 @@ fn smits_never_negative_for_any_input() {
         for j in 0..=10 {
             for k in 0..=10 {
                 let rgb = [i as f64 / 10.0, j as f64 / 10.0, k as f64 / 10.0];
-                let v = g.project(&Spectrum::Reflectance(rgb), Role::Reflectance);
+                let v = g.project(&Spectrum::reflectance(rgb), Role::Reflectance);
                 assert!(v.iter().all(|x| x.is_finite() && *x >= 0.0));
             }
         }
@@ -138,7 +138,7 @@ fn smits_never_negative_for_any_input() {
 fn compact_colour_error(g: &BinGrid, base: &[f32], refl: [f64; 3], bounces: usize) -> f64 {
     let smits = g.smits().unwrap();
     let mut s = base.to_vec();
-    let r = g.project(&Spectrum::Reflectance(refl), Role::Reflectance);
+    let r = g.project(&Spectrum::reflectance(refl), Role::Reflectance);
     for _ in 0..bounces {
         spd::mul_assign(&mut s, &r);
     }
@@ -165,9 +165,12 @@ const CORNELL: [[f64; 3]; 3] = [[0.73, 0.73, 0.73], [0.63, 0.065, 0.05], [0.14, 
 fn compact_triplet_preserves_colour_exactly_inside_smits_gamut() {
     // One bounce of the Cornell light off each Cornell material: the triplet decodes to a
     // spectrum of exactly the same colour from 8 bins on.
+    // (Smits-upsampled scene colours: the paper's setting.)
     for n in [8, 10, 20, 100, 1000] {
-        let g = BinGrid::with_bins(n).unwrap();
-        let light = g.project(&Spectrum::Illuminant([17.0, 12.0, 4.0]), Role::Emission);
+        let g = BinGrid::with_bins(n)
+            .unwrap()
+            .with_upsampling(Upsampling::Smits);
+        let light = g.project(&Spectrum::illuminant([17.0, 12.0, 4.0]), Role::Emission);
         for refl in CORNELL {
             let err = compact_colour_error(&g, &light, refl, 1);
             assert!(err < 1e-4, "n={n} {refl:?}: {err}");
@@ -176,13 +179,35 @@ fn compact_triplet_preserves_colour_exactly_inside_smits_gamut() {
 }
 
 #[test]
+fn compact_triplet_error_with_jakob_hanika_scene_colours() {
+    // Jakob–Hanika spectra are not Smits spectra: a photon's flux after a bounce is no
+    // longer exactly reachable by a Smits triplet, and the compact record keeps the
+    // nearest colour. Measured: 0 on the grey and red walls, 3.7–7.5 % of the largest
+    // channel on the green one (8–100 bins): the price of the paper's record on scenes
+    // whose colours are right.
+    let mut worst: f64 = 0.0;
+    for n in [8, 10, 20, 100] {
+        let g = BinGrid::with_bins(n).unwrap();
+        let light = g.project(&Spectrum::illuminant([17.0, 12.0, 4.0]), Role::Emission);
+        for refl in CORNELL {
+            let err = compact_colour_error(&g, &light, refl, 1);
+            println!("n={n} {refl:?}: {err:.4}");
+            worst = worst.max(err);
+        }
+    }
+    assert!(worst < 0.08, "{worst}");
+}
+
+#[test]
 fn compact_triplet_error_is_bounded_outside_smits_gamut() {
     // Repeated reflections off saturated colours, or a 3000 K light, leave Smits' gamut
     // (no non-negative triplet reaches them): the nearest reachable colour is stored.
     // Measured worst case over these inputs: 31% of the largest channel (6 bins, green²).
     for n in [4, 5, 6, 8, 10, 20, 100, 1000] {
-        let g = BinGrid::with_bins(n).unwrap();
-        let light = g.project(&Spectrum::Illuminant([17.0, 12.0, 4.0]), Role::Emission);
+        let g = BinGrid::with_bins(n)
+            .unwrap()
+            .with_upsampling(Upsampling::Smits);
+        let light = g.project(&Spectrum::illuminant([17.0, 12.0, 4.0]), Role::Emission);
         let bb = g.project(&Spectrum::blackbody(3000.0, 12.0).unwrap(), Role::Emission);
         for base in [&light, &bb] {
             for refl in CORNELL {
