@@ -194,6 +194,37 @@ fn saving_writes_png_and_exr() {
 }
 
 #[test]
+fn keep_spectra_then_save_writes_a_spectral_exr() {
+    // Issue #14: the viewer can save the film's bins. Off by default (no spectral film
+    // memory that nothing reads); ticking "Keep spectra" keeps them from the next pass on.
+    let mut h = harness("prism");
+    let dir = std::env::temp_dir().join(format!("prismap-viewer-spectral-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    h.state_mut().save_dir = dir.clone();
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    assert!(h.state().snapshot.as_ref().unwrap().spectra.is_none());
+    h.get_by_label("Keep spectra").click();
+    h.step();
+    wait_until(&mut h, "a pass with spectra", |a| {
+        a.snapshot.as_ref().is_some_and(|s| s.spectra.is_some())
+    });
+    h.get_by_label("Save spectral EXR").click();
+    h.step();
+    let file = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_string_lossy().ends_with(".spectral.exr"))
+        .expect("a spectral EXR was saved");
+    let (spectra, rgb) = prismap::output::read_spectral_exr(&file).unwrap();
+    let bins = h.state().snapshot.as_ref().unwrap().bins;
+    assert_eq!(spectra.wavelengths.len(), bins);
+    assert_eq!((spectra.width, spectra.height), (48, 48));
+    assert!(rgb.is_some());
+    assert!(spectra.values.iter().any(|v| *v > 0.0));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn viewer_image_after_n_passes_equals_the_engines() {
     let mut h = harness("prism");
     h.state().stop_after(Some(3));

@@ -130,6 +130,8 @@ pub struct ViewerApp {
     /// Whether `status` reports a failure (shown in red).
     pub status_is_error: bool,
     pub save_dir: PathBuf,
+    /// Whether the worker keeps every pixel's spectrum (for "Save spectral EXR").
+    pub keep_spectra: bool,
     capture: Option<Capture>,
     capture_done: Arc<AtomicBool>,
     capture_requested: bool,
@@ -195,7 +197,8 @@ impl ViewerApp {
             memory_history: VecDeque::new(),
             status_is_error: !status.is_empty(),
             status,
-            save_dir: PathBuf::from("screenshots"),
+            save_dir: default_save_dir(),
+            keep_spectra: false,
             capture_requested: false,
             capture,
             capture_done: Arc::new(AtomicBool::new(false)),
@@ -365,7 +368,14 @@ impl ViewerApp {
         self.worker.error()
     }
 
-    /// Saves the current image as PNG (display values) or EXR (linear) in `save_dir`.
+    /// Keeps (or frees) every pixel's spectrum from the next pass on.
+    pub fn set_keep_spectra(&mut self, on: bool) {
+        self.keep_spectra = on;
+        self.worker.send(worker::Command::KeepSpectra(on));
+    }
+
+    /// Saves the current image as PNG (display values), EXR (linear) or spectral EXR in
+    /// `save_dir`.
     pub fn save(&mut self, ext: &str) -> Result<PathBuf, String> {
         let snap = self.snapshot.as_ref().ok_or("nothing rendered yet")?;
         std::fs::create_dir_all(&self.save_dir)
@@ -388,11 +398,18 @@ impl ViewerApp {
             snap.stats.passes
         );
         let path = self.save_dir.join(name);
-        let result = if ext == "png" {
-            let bytes = tone_map(&snap.image, self.exposure, self.tone);
-            crate::output::write_png8(&path, &bytes, snap.image.width, snap.image.height)
-        } else {
-            crate::output::write_exr(&path, &snap.image)
+        let result = match ext {
+            "png" => {
+                let bytes = tone_map(&snap.image, self.exposure, self.tone);
+                crate::output::write_png8(&path, &bytes, snap.image.width, snap.image.height)
+            }
+            "spectral.exr" => match &snap.spectra {
+                Some(spectra) => crate::output::write_spectral_exr(&path, spectra, &snap.image),
+                None => {
+                    return Err("tick \"Keep spectra\" and let a pass finish first".to_string());
+                }
+            },
+            _ => crate::output::write_exr(&path, &snap.image),
         };
         result.map_err(|e| e.to_string())?;
         self.note(format!("saved {}", path.display()));
@@ -816,5 +833,23 @@ pub fn display_available() -> bool {
             || std::env::var_os("WAYLAND_DISPLAY").is_some_and(|v| !v.is_empty())
     } else {
         true
+    }
+}
+
+/// Where the viewer saves: the user's pictures folder (`$XDG_PICTURES_DIR`, else
+/// `~/Pictures` when it exists) in a `prismap` subfolder, else the working folder — never
+/// the project's own `screenshots/`.
+pub fn default_save_dir() -> PathBuf {
+    let pictures = std::env::var_os("XDG_PICTURES_DIR")
+        .map(PathBuf::from)
+        .filter(|p| p.is_dir())
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .map(|h| PathBuf::from(h).join("Pictures"))
+                .filter(|p| p.is_dir())
+        });
+    match pictures {
+        Some(p) => p.join("prismap"),
+        None => std::env::current_dir().unwrap_or_else(|_| PathBuf::from(".")),
     }
 }

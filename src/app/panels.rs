@@ -207,6 +207,25 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         }
                     }
                 });
+                ui.horizontal(|ui| {
+                    let spectral = app.settings.storage != Storage::Rgb;
+                    let mut keep = app.keep_spectra;
+                    if ui
+                        .add_enabled(spectral, egui::Checkbox::new(&mut keep, "Keep spectra"))
+                        .on_hover_text("Keep every pixel's spectrum (4 bytes per bin per pixel, shown in the memory panel) so it can be saved as a spectral EXR")
+                        .changed()
+                    {
+                        app.set_keep_spectra(keep);
+                    }
+                    let ready = app.snapshot.as_ref().is_some_and(|s| s.spectra.is_some());
+                    if ui
+                        .add_enabled(ready, egui::Button::new("Save spectral EXR"))
+                        .on_hover_text("Every bin as a channel S0.<wavelength>nm beside R, G, B (Fichet et al. 2021's OpenEXR layout for spectral images)")
+                        .clicked()
+                    {
+                        app.act(Action::Save("spectral.exr"));
+                    }
+                });
                 ui.small(format!("into {}/", app.save_dir.display()));
                 ui.separator();
                 compare_controls(app, ui);

@@ -27,6 +27,8 @@ pub enum Command {
     Probes(Vec<(u32, u32)>),
     /// Stop after `passes` passes (None: run until paused or restarted).
     StopAfter(Option<u64>),
+    /// Keep every pixel's spectrum (for a spectral EXR), or free it.
+    KeepSpectra(bool),
 }
 
 /// What the UI shows after a pass.
@@ -53,6 +55,8 @@ pub struct Snapshot {
     /// The film's noise estimate (PSNR against its own expectation) at the image's
     /// automatic exposure; None before 2 passes.
     pub noise_psnr_db: Option<f64>,
+    /// Every pixel's spectrum, when the user asked to keep them.
+    pub spectra: Option<Arc<crate::output::SpectralImage>>,
 }
 
 /// Nearest-neighbour upscale of a preview to the full image size.
@@ -218,6 +222,7 @@ fn run(
     let mut paused = false;
     let mut probes: Vec<(u32, u32)> = Vec::new();
     let mut stop_after: Option<u64> = None;
+    let mut keep_spectra = false;
     // Commands that arrived during a run: the run stops after its pass to handle them.
     let mut inbox: Vec<Command> = Vec::new();
     loop {
@@ -284,6 +289,9 @@ fn run(
                                 repaint();
                             }
                             session.set_probes(&probes);
+                            if session.scene().grid.smits().is_some() {
+                                session.keep_spectra(keep_spectra);
+                            }
                             *cancel_slot.lock().unwrap_or_else(PoisonError::into_inner) =
                                 session.cancel_flag();
                             job = Some(Job {
@@ -308,6 +316,14 @@ fn run(
                     }
                 }
                 Command::StopAfter(n) => stop_after = n,
+                Command::KeepSpectra(on) => {
+                    keep_spectra = on;
+                    if let Some(j) = &mut job
+                        && j.session.scene().grid.smits().is_some()
+                    {
+                        j.session.keep_spectra(on);
+                    }
+                }
             }
         }
         let Some(j) = &mut job else { continue };
@@ -398,5 +414,13 @@ fn snapshot(s: &RenderSession, generation: u64, started: Instant) -> Snapshot {
         emitter_pixels: s.emitter_pixels(),
         since_start: started.elapsed().as_secs_f64(),
         preview: false,
+        spectra: s.spectral_film().map(|f| {
+            Arc::new(crate::output::SpectralImage {
+                width: f.width(),
+                height: f.height(),
+                wavelengths: s.scene().grid.centers().to_vec(),
+                values: f.develop(),
+            })
+        }),
     }
 }

@@ -20,6 +20,10 @@ pub fn render(args: RenderArgs) -> Result<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{}.png", scene.name)));
     check_writable(&output, &["png", "exr"])?;
+    if args.spectral {
+        check_writable(&output, &["exr"])
+            .context("--spectral writes an OpenEXR file: give -o NAME.exr")?;
+    }
     for (path, ext) in [(&args.stats, "json"), (&args.error_csv, "csv")] {
         if let Some(p) = path {
             check_writable(p, &[ext])?;
@@ -44,6 +48,12 @@ pub fn render(args: RenderArgs) -> Result<()> {
         .build()
         .context("cannot start the worker threads")?;
     let mut session = pool.install(|| RenderSession::new(&scene, settings))?;
+    if args.spectral {
+        if session.scene().grid.transport() == crate::spectral::Transport::Rgb {
+            bail!("--spectral: --storage rgb renders no spectra (use full or compact)");
+        }
+        session.keep_spectra(true);
+    }
     let bar = progress_bar(stop);
     // The error log compares display values at the given exposure (1 when automatic:
     // the reference and the render are the same scene).
@@ -70,7 +80,18 @@ pub fn render(args: RenderArgs) -> Result<()> {
     if is_png && let Some(w) = output::clipping_warning(&image, exposure) {
         eprintln!("warning: {w}");
     }
-    output::write_image(&output, &image, exposure)?;
+    match session.spectral_film() {
+        Some(film) => {
+            let spectra = output::SpectralImage {
+                width: film.width(),
+                height: film.height(),
+                wavelengths: session.scene().grid.centers().to_vec(),
+                values: film.develop(),
+            };
+            output::write_spectral_exr(&output, &spectra, &image)?;
+        }
+        None => output::write_image(&output, &image, exposure)?,
+    }
     let stats = Stats::of(&session, &image, start.elapsed().as_secs_f64());
     if let Some(path) = &args.stats {
         output::write_json(path, &stats)?;

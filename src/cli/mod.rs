@@ -103,6 +103,10 @@ pub struct RenderArgs {
     /// Output image: .png (sRGB) or .exr (linear sRGB). Default: SCENE.png.
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,
+    /// With an .exr output: write every bin as a spectral channel (Fichet et al. 2021's
+    /// layout, S0.<wavelength>nm) beside R, G, B. Keeps 4 bytes per bin per pixel.
+    #[arg(long)]
+    pub spectral: bool,
     /// Write render statistics as JSON here.
     #[arg(long)]
     pub stats: Option<PathBuf>,

@@ -2,6 +2,7 @@
 //! JSON. Every file is written to a temporary name beside the target and renamed, so an
 //! interrupted write never leaves a corrupt file under the real name.
 
+mod spectral_exr;
 mod stats;
 
 use std::io::Write;
@@ -9,6 +10,9 @@ use std::path::{Path, PathBuf};
 
 use crate::render::Image;
 use crate::spectral::color::srgb8;
+pub use spectral_exr::{
+    SpectralImage, channel_name, parse_channel_name, read_spectral_exr, write_spectral_exr,
+};
 pub use stats::{MemoryStats, PhotonStats, RadiusStats, SecondsStats, Stats};
 
 #[derive(Debug, thiserror::Error)]

@@ -210,3 +210,74 @@ mod tests {
         assert_eq!(f.dropped_samples(), 2);
     }
 }
+
+/// Per-pixel spectra, kept only when something will read them (a spectral EXR): N bins
+/// per pixel summed over passes in f32 (4·N bytes a pixel: 100 bins at 256² is 26 MB).
+/// Same rule as [`Film`]: a non-finite sample contributes 0 to its pixel.
+#[derive(Clone, Debug)]
+pub struct SpectralFilm {
+    width: u32,
+    height: u32,
+    bins: usize,
+    sum: Vec<f32>,
+    passes: u64,
+}
+
+impl SpectralFilm {
+    pub fn new(width: u32, height: u32, bins: usize) -> Self {
+        Self {
+            width,
+            height,
+            bins,
+            sum: vec![0.0; width as usize * height as usize * bins],
+            passes: 0,
+        }
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    pub fn bins(&self) -> usize {
+        self.bins
+    }
+
+    pub fn passes(&self) -> u64 {
+        self.passes
+    }
+
+    /// Adds one pass: `bins` values per pixel, row-major.
+    pub fn add_pass(&mut self, pass: &[f32]) {
+        debug_assert_eq!(pass.len(), self.sum.len());
+        for (px, src) in self
+            .sum
+            .chunks_exact_mut(self.bins)
+            .zip(pass.chunks_exact(self.bins))
+        {
+            if src.iter().all(|v| v.is_finite()) {
+                for (s, v) in px.iter_mut().zip(src) {
+                    *s += v;
+                }
+            }
+        }
+        self.passes += 1;
+    }
+
+    /// The mean spectrum of every pixel, `bins` values each, row-major, top row first.
+    pub fn develop(&self) -> Vec<f32> {
+        let k = if self.passes > 0 {
+            1.0 / self.passes as f32
+        } else {
+            0.0
+        };
+        self.sum.iter().map(|v| v * k).collect()
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        self.sum.len() * 4
+    }
+}

@@ -6,7 +6,7 @@ pub mod run;
 pub mod session;
 pub mod settings;
 
-pub use film::{Film, Image};
+pub use film::{Film, Image, SpectralFilm};
 pub use run::{ErrorReference, Flow, PassRecord, Stop, error_csv};
 pub use session::{MemoryReport, Probe, RenderError, RenderSession, RenderStats};
 pub use settings::{RenderSettings, SettingsError};

@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::film::{Film, Image};
+use super::film::{Film, Image, SpectralFilm};
 use super::gather::{Gather, Scratch};
 use super::settings::{RenderSettings, SettingsError, default_photon_budget};
 use crate::photon::{
@@ -40,8 +40,9 @@ pub enum RenderError {
     Reference(#[from] crate::metrics::SizeMismatch),
 }
 
-/// A pass image (linear sRGB per pixel) and the probed pixels' spectra.
-type PassImage = (Vec<[f32; 3]>, Vec<(usize, Vec<f32>)>);
+/// A pass image (linear sRGB per pixel), the probed pixels' spectra, and every pixel's
+/// spectrum when a spectral film is kept.
+type PassImage = (Vec<[f32; 3]>, Vec<(usize, Vec<f32>)>, Vec<f32>);
 
 /// Bytes of each part of a render, measured exactly.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -95,6 +96,8 @@ pub struct RenderSession {
     cancel: Arc<AtomicBool>,
     /// Pixels whose spectra are kept (the probe): the only spectral film memory.
     probes: Vec<Probe>,
+    /// Every pixel's spectrum, when asked for (see [`RenderSession::keep_spectra`]).
+    spectra: Option<SpectralFilm>,
     /// Photon-map bytes per emitted photon in the latest pass (for the budget).
     bytes_per_emitted: Option<f64>,
     /// This pass's typical (median k-nearest) radii of the global and caustic maps.
@@ -175,6 +178,7 @@ impl RenderSession {
             memory,
             cancel: Arc::new(AtomicBool::new(false)),
             probes: Vec::new(),
+            spectra: None,
             bytes_per_emitted: None,
             typical: (0.0, 0.0),
             emitter_pixels: std::sync::OnceLock::new(),
@@ -209,8 +213,29 @@ impl RenderSession {
         &self.probes
     }
 
+    /// Keeps every pixel's spectrum from the next pass on (for a spectral EXR), or stops
+    /// and frees it. 4 bytes per bin per pixel.
+    pub fn keep_spectra(&mut self, on: bool) {
+        self.spectra = match (on, self.spectra.take()) {
+            (true, Some(s)) => Some(s),
+            (true, None) => Some(SpectralFilm::new(
+                self.settings.width,
+                self.settings.height,
+                self.scene.bins(),
+            )),
+            (false, _) => None,
+        };
+        self.memory.film = self.film.memory_bytes() + self.probe_bytes();
+    }
+
+    /// The per-pixel spectra, when kept.
+    pub fn spectral_film(&self) -> Option<&SpectralFilm> {
+        self.spectra.as_ref()
+    }
+
     fn probe_bytes(&self) -> usize {
-        self.probes.iter().map(|p| p.sum.len() * 8).sum()
+        self.probes.iter().map(|p| p.sum.len() * 8).sum::<usize>()
+            + self.spectra.as_ref().map_or(0, |s| s.memory_bytes())
     }
 
     pub fn scene(&self) -> &Arc<SpectralScene> {
@@ -266,7 +291,7 @@ impl RenderSession {
         if let Some(note) = &self.stats.budget_note {
             s.push(note.clone());
         }
-        if self.probes.is_empty() {
+        if self.probes.is_empty() && self.spectra.is_none() {
             s.push("spectral film: nothing reads per-pixel spectra in this run".to_string());
         }
         s
@@ -308,9 +333,12 @@ impl RenderSession {
             final_gather_rays: self.settings.final_gather_rays,
             max_bounces: self.settings.max_bounces,
         };
-        let (image, probe_spectra) = self.gather_image(&gather, pass)?;
+        let (image, probe_spectra, all_spectra) = self.gather_image(&gather, pass)?;
         self.film.add_pass(&image);
         self.add_probe_spectra(probe_spectra);
+        if let Some(s) = &mut self.spectra {
+            s.add_pass(&all_spectra);
+        }
         let times = (start, photon_done, Instant::now());
         self.record_pass(&maps, photons, (r_global, r_caustic), times);
         self.memory.irradiance_cache = irradiance.as_ref().map_or(0, |c| c.memory_bytes());
@@ -425,6 +453,7 @@ impl RenderSession {
         let (w, h) = (self.settings.width, self.settings.height);
         let (seed, n) = (self.settings.seed, self.scene.bins());
         let (cancel, probes, grid) = (&self.cancel, &self.probes, &self.scene.grid);
+        let keep_all = self.spectra.is_some();
         let rows: Vec<Option<PassImage>> = (0..h)
             .into_par_iter()
             .map_init(
@@ -434,6 +463,7 @@ impl RenderSession {
                         return None;
                     }
                     let mut spectra = Vec::new();
+                    let mut all = Vec::with_capacity(if keep_all { w as usize * n } else { 0 });
                     scratch.start_row();
                     let row = (0..w)
                         .map(|x| {
@@ -443,21 +473,26 @@ impl RenderSession {
                             if let Some(k) = probes.iter().position(|p| (p.x, p.y) == (x, y)) {
                                 spectra.push((k, radiance.clone()));
                             }
+                            if keep_all {
+                                all.extend_from_slice(radiance);
+                            }
                             grid.to_linear_srgb(radiance)
                         })
                         .collect();
-                    Some((row, spectra))
+                    Some((row, spectra, all))
                 },
             )
             .collect();
         let mut image = Vec::with_capacity((w * h) as usize);
         let mut probe_spectra = Vec::new();
+        let mut all_spectra = Vec::new();
         for r in rows {
-            let (row, spectra) = r.ok_or(RenderError::Cancelled)?;
+            let (row, spectra, all) = r.ok_or(RenderError::Cancelled)?;
             image.extend(row);
             probe_spectra.extend(spectra);
+            all_spectra.extend(all);
         }
-        Ok((image, probe_spectra))
+        Ok((image, probe_spectra, all_spectra))
     }
 
     /// Adds a pass's probe spectra (same rule as the film: a non-finite sample is dropped).
