@@ -225,6 +225,30 @@ fn keep_spectra_then_save_writes_a_spectral_exr() {
 }
 
 #[test]
+fn reaching_the_noise_target_marks_the_pass_and_can_pause() {
+    // Issue #13: a "target reached" marker and an optional stop at the target.
+    let mut h = harness("cornell-box");
+    h.state_mut().target_db = 12.0;
+    h.state_mut().stop_at_target = true;
+    wait_until(&mut h, "the target", |a| a.target_is_reached());
+    let (_, at_pass, _) = h.state().target_reached.unwrap();
+    assert!(at_pass >= 2, "the estimate needs two passes: {at_pass}");
+    assert!(h.state().paused, "stop at target pauses");
+    let db = h.state().snapshot.as_ref().unwrap().noise_psnr_db.unwrap();
+    assert!(db >= 12.0, "{db}");
+    assert!(
+        h.state().status.contains("target 12 dB reached"),
+        "{}",
+        h.state().status
+    );
+    // A higher target is not reached yet: the marker goes.
+    h.state_mut().target_db = 80.0;
+    h.state_mut().target_reached = None;
+    h.step();
+    assert!(!h.state().target_is_reached());
+}
+
+#[test]
 fn viewer_image_after_n_passes_equals_the_engines() {
     let mut h = harness("prism");
     h.state().stop_after(Some(3));

@@ -132,6 +132,12 @@ pub struct ViewerApp {
     pub save_dir: PathBuf,
     /// Whether the worker keeps every pixel's spectrum (for "Save spectral EXR").
     pub keep_spectra: bool,
+    /// The noise level (PSNR of the "noise left" estimate, dB) that counts as converged.
+    pub target_db: f64,
+    /// Pause when the target is reached.
+    pub stop_at_target: bool,
+    /// When the current render first reached the target: (generation, passes, seconds).
+    pub target_reached: Option<(u64, u64, f64)>,
     capture: Option<Capture>,
     capture_done: Arc<AtomicBool>,
     capture_requested: bool,
@@ -199,6 +205,9 @@ impl ViewerApp {
             status,
             save_dir: default_save_dir(),
             keep_spectra: false,
+            target_db: DEFAULT_TARGET_DB,
+            stop_at_target: false,
+            target_reached: None,
             capture_requested: false,
             capture,
             capture_done: Arc::new(AtomicBool::new(false)),
@@ -440,12 +449,43 @@ impl ViewerApp {
                         crate::output::auto_exposure(&s.image)
                     };
                 }
+                self.check_target(&s);
                 self.snapshot = Some(s);
                 self.upload(ctx);
             }
         }
         if self.shown_tone != (self.exposure, self.tone) && self.snapshot.is_some() {
             self.upload(ctx);
+        }
+    }
+
+    /// Marks the pass where the noise estimate first reaches the target (and pauses, if
+    /// asked). A new render (a new generation) starts unmarked.
+    fn check_target(&mut self, s: &worker::Snapshot) {
+        if self
+            .target_reached
+            .is_some_and(|(g, _, _)| g != s.generation)
+        {
+            self.target_reached = None;
+        }
+        let reached = !s.preview && s.noise_psnr_db.is_some_and(|db| db >= self.target_db);
+        if reached && self.target_reached.is_none() {
+            self.target_reached = Some((s.generation, s.stats.passes, s.since_start));
+            if self.stop_at_target && !self.paused {
+                self.set_paused(true);
+                self.note(format!(
+                    "target {:.0} dB reached after {} passes ({:.1} s): paused (space resumes)",
+                    self.target_db, s.stats.passes, s.since_start
+                ));
+            }
+        }
+    }
+
+    /// Whether the shown render has reached the noise target.
+    pub fn target_is_reached(&self) -> bool {
+        match (&self.target_reached, &self.snapshot) {
+            (Some((g, _, _)), Some(s)) => *g == s.generation,
+            _ => false,
         }
     }
 
@@ -835,6 +875,10 @@ pub fn display_available() -> bool {
         true
     }
 }
+
+/// The default noise target: 40 dB of "noise left" (the level at which the paper's
+/// comparisons call an image clean).
+pub const DEFAULT_TARGET_DB: f64 = 40.0;
 
 /// Where the viewer saves: the user's pictures folder (`$XDG_PICTURES_DIR`, else
 /// `~/Pictures` when it exists) in a `prismap` subfolder, else the working folder — never

@@ -382,7 +382,33 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         if let (Some(db), false) = (s.noise_psnr_db, s.preview) {
                             row("noise left", format!("≈ {db:.1} dB"));
                         }
+                        row(
+                            "target",
+                            match app.target_reached {
+                                Some((g, passes, secs)) if g == s.generation => {
+                                    format!("{:.0} dB reached at pass {passes}, {secs:.1} s", app.target_db)
+                                }
+                                _ => format!("{:.0} dB: not yet", app.target_db),
+                            },
+                        );
                     });
+                ui.horizontal(|ui| {
+                    ui.label("Target");
+                    if ui
+                        .add(
+                            egui::DragValue::new(&mut app.target_db)
+                                .range(10.0..=80.0)
+                                .speed(0.5)
+                                .suffix(" dB"),
+                        )
+                        .on_hover_text("The noise level that counts as converged (the \"noise left\" estimate); +3 dB takes twice the passes")
+                        .changed()
+                    {
+                        app.target_reached = None;
+                    }
+                    ui.checkbox(&mut app.stop_at_target, "stop there")
+                        .on_hover_text("Pause when the target is reached (space resumes)");
+                });
                 if s.noise_psnr_db.is_some() && !s.preview {
                     ui.small("noise left: PSNR of the image against its own expectation, from the odd against the even passes (noise only, not the bias a radius still carries); +3 dB per doubling of passes");
                 }
