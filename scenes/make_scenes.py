@@ -179,7 +179,7 @@ def refract(d, n, eta):
 
 
 # The prism's camera: (along the beam, to the side, height, vertical field of view °).
-FIRST_LOOK = (1.30, 0.10, 0.36, 40.0)
+FIRST_LOOK = (1.22, 0.10, 0.28, 38.0)
 
 
 def prism(path):
@@ -298,7 +298,7 @@ def prism(path):
     perp = (-axis[2], 0, axis[0])
     if dot(perp, sub(light_pos, (0, 0, 0))) > 0:
         perp = mul(perp, -1)  # look from the side away from the light
-    target = add(mul(axis, 0.58 * math.hypot(rainbow[0], rainbow[2])), (0, 0.05, 0))
+    target = add(mul(axis, 0.74 * math.hypot(rainbow[0], rainbow[2])), (0, 0.04, 0))
     cam = add(add(mul(axis, FIRST_LOOK[0]), mul(perp, FIRST_LOOK[1])), (0, FIRST_LOOK[2], 0))
     g.camera("camera", cam, sub(target, cam), (0, 1, 0), FIRST_LOOK[3], 16 / 9)
     g.write(path)

@@ -385,10 +385,8 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         row(
                             "target",
                             match app.target_reached {
-                                Some((g, passes, secs)) if g == s.generation => {
-                                    format!("{:.0} dB reached at pass {passes}, {secs:.1} s", app.target_db)
-                                }
-                                _ => format!("{:.0} dB: not yet", app.target_db),
+                                Some((g, _, _)) if g == s.generation => "reached".to_string(),
+                                _ => "not yet".to_string(),
                             },
                         );
                     });
@@ -409,6 +407,14 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     ui.checkbox(&mut app.stop_at_target, "stop there")
                         .on_hover_text("Pause when the target is reached (space resumes)");
                 });
+                if let Some((g, passes, secs)) = app.target_reached
+                    && g == s.generation
+                {
+                    ui.small(format!(
+                        "{:.0} dB reached at pass {passes}, after {secs:.1} s",
+                        app.target_db
+                    ));
+                }
                 if s.noise_psnr_db.is_some() && !s.preview {
                     ui.small("noise left: PSNR of the image against its own expectation, from the odd against the even passes (noise only, not the bias a radius still carries); +3 dB per doubling of passes");
                 }
