@@ -249,6 +249,29 @@ fn reaching_the_noise_target_marks_the_pass_and_can_pause() {
 }
 
 #[test]
+fn the_denoised_view_is_display_only() {
+    // Issue #13: an optional, labelled denoised display; the film and saves stay raw.
+    let mut h = harness("cornell-box");
+    h.state().stop_after(Some(2));
+    wait_until(&mut h, "2 passes", |a| passes(a) == 2);
+    let raw = h.state().snapshot.as_ref().unwrap().image.clone();
+    h.get_by_label("Denoised view").click();
+    h.step();
+    wait_until(&mut h, "a denoised image", |a| {
+        a.snapshot.as_ref().is_some_and(|s| s.denoised.is_some())
+    });
+    let snap = h.state().snapshot.clone().unwrap();
+    assert!(h.state().denoise_view);
+    assert_eq!(*snap.image, *raw, "the raw image is unchanged");
+    assert_ne!(*snap.denoised.unwrap(), *raw, "the view is filtered");
+    h.get_by_label("DENOISED VIEW (display only)");
+    // D toggles it back.
+    h.key_press(egui::Key::D);
+    h.step();
+    assert!(!h.state().denoise_view);
+}
+
+#[test]
 fn viewer_image_after_n_passes_equals_the_engines() {
     let mut h = harness("prism");
     h.state().stop_after(Some(3));

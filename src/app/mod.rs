@@ -109,7 +109,7 @@ pub struct ViewerApp {
     pub tone: ToneMap,
     pub paused: bool,
     texture: Option<egui::TextureHandle>,
-    shown: Option<(u64, u64)>,
+    shown: Option<(u64, u64, bool)>,
     shown_tone: (f32, ToneMap),
     pub snapshot: Option<Snapshot>,
     /// The probed pixel and up to three pinned ones.
@@ -132,6 +132,8 @@ pub struct ViewerApp {
     pub save_dir: PathBuf,
     /// Whether the worker keeps every pixel's spectrum (for "Save spectral EXR").
     pub keep_spectra: bool,
+    /// Whether the image shown is the denoised view (display only).
+    pub denoise_view: bool,
     /// The noise level (PSNR of the "noise left" estimate, dB) that counts as converged.
     pub target_db: f64,
     /// Pause when the target is reached.
@@ -205,6 +207,7 @@ impl ViewerApp {
             status,
             save_dir: default_save_dir(),
             keep_spectra: false,
+            denoise_view: false,
             target_db: DEFAULT_TARGET_DB,
             stop_at_target: false,
             target_reached: None,
@@ -377,6 +380,14 @@ impl ViewerApp {
         self.worker.error()
     }
 
+    /// Shows the denoised view (or the raw image again). Display only: saves, probes and
+    /// every error figure keep reading the raw film.
+    pub fn set_denoise_view(&mut self, on: bool) {
+        self.denoise_view = on;
+        self.worker.send(worker::Command::Denoise(on));
+        self.shown_tone = (f32::NAN, self.tone); // re-upload what is shown
+    }
+
     /// Keeps (or frees) every pixel's spectrum from the next pass on.
     pub fn set_keep_spectra(&mut self, on: bool) {
         self.keep_spectra = on;
@@ -428,7 +439,7 @@ impl ViewerApp {
     /// Pulls the newest snapshot and uploads it to the texture when it is new.
     fn poll(&mut self, ctx: &egui::Context) {
         if let Some(s) = self.worker.latest() {
-            let key = (s.generation, s.stats.passes);
+            let key = (s.generation, s.stats.passes, s.denoised.is_some());
             if self.shown != Some(key) {
                 if self.first_image_latency.is_none() {
                     self.first_image_latency = Some(self.changed_at.elapsed().as_secs_f64());
@@ -491,9 +502,12 @@ impl ViewerApp {
 
     fn upload(&mut self, ctx: &egui::Context) {
         let Some(s) = &self.snapshot else { return };
-        let bytes = tone_map(&s.image, self.exposure, self.tone);
-        let img =
-            egui::ColorImage::from_rgb([s.image.width as usize, s.image.height as usize], &bytes);
+        let shown = match (&s.denoised, self.denoise_view) {
+            (Some(d), true) => d,
+            _ => &s.image,
+        };
+        let bytes = tone_map(shown, self.exposure, self.tone);
+        let img = egui::ColorImage::from_rgb([shown.width as usize, shown.height as usize], &bytes);
         match &mut self.texture {
             Some(t) => t.set(img, egui::TextureOptions::NEAREST),
             None => {
@@ -649,7 +663,7 @@ impl ViewerApp {
     /// Keyboard shortcuts (when no text field has the keyboard): space pauses or resumes,
     /// R restarts, V resets the view, S saves a PNG, E an EXR, 1 / 2 / 3 switch to full /
     /// compact / RGB storage, A picks the bins automatically, F freezes "A" for compare
-    /// mode (and leaves it).
+    /// mode (and leaves it), D shows the denoised view (or the raw image).
     fn shortcuts(&mut self, ctx: &egui::Context) {
         if ctx.egui_wants_keyboard_input() {
             return;
@@ -670,6 +684,9 @@ impl ViewerApp {
         }
         if pressed(Key::E) {
             self.act(Action::Save("exr"));
+        }
+        if pressed(Key::D) {
+            self.set_denoise_view(!self.denoise_view);
         }
         for (k, s) in [
             (Key::Num1, Storage::Full),

@@ -169,9 +169,19 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         .on_hover_text("Expose each new image so middle grey and the highlights both show (photometric scenes can be thousands of nits)");
                 });
                 ui.horizontal(|ui| {
-                    ui.radio_value(&mut app.tone, ToneMap::Clamp, "clamp");
-                    ui.radio_value(&mut app.tone, ToneMap::Reinhard, "Reinhard");
+                    ui.radio_value(&mut app.tone, ToneMap::Clamp, "clamp")
+                        .on_hover_text("Display values above 1 as white");
+                    ui.radio_value(&mut app.tone, ToneMap::Reinhard, "Reinhard")
+                        .on_hover_text("Compress highlights: x / (1 + x)");
                 });
+                let mut denoise = app.denoise_view;
+                if ui
+                    .checkbox(&mut denoise, "Denoised view")
+                    .on_hover_text("Show the image filtered (edge-avoiding à-trous guided by normals, depth and albedo; a few ms). Display only: saves, probes and error figures use the raw film  [D]")
+                    .changed()
+                {
+                    app.set_denoise_view(denoise);
+                }
                 ui.separator();
                 ui.horizontal(|ui| {
                     let label = if app.paused { "Resume" } else { "Pause" };
@@ -229,7 +239,7 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 ui.small(format!("into {}/", app.save_dir.display()));
                 ui.separator();
                 compare_controls(app, ui);
-                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/3 storage · A auto bins · F freeze A");
+                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/3 storage · A auto bins · F freeze A · D denoised view");
                 if restart {
                     app.act(Action::Restart);
                 }
@@ -770,6 +780,22 @@ pub fn image(app: &mut ViewerApp, ui: &mut egui::Ui) {
             egui::Image::from_texture(egui::load::SizedTexture::new(tex.id(), size))
                 .sense(egui::Sense::click_and_drag()),
         );
+        if app.denoise_view {
+            let at = egui::Rect::from_min_size(
+                rect.left_top() + egui::vec2(6.0, 4.0),
+                egui::vec2(260.0, 18.0),
+            );
+            ui.put(
+                at,
+                egui::Label::new(
+                    egui::RichText::new("DENOISED VIEW (display only)")
+                        .color(egui::Color32::from_rgb(255, 200, 80))
+                        .strong(),
+                )
+                .selectable(false)
+                .sense(egui::Sense::hover()),
+            );
+        }
         let to_pixel = |pos: egui::Pos2| -> Option<(u32, u32)> {
             let r = resp.rect;
             let u = (pos.x - r.min.x) / r.width();

@@ -29,6 +29,8 @@ pub enum Command {
     StopAfter(Option<u64>),
     /// Keep every pixel's spectrum (for a spectral EXR), or free it.
     KeepSpectra(bool),
+    /// Add a denoised display image to each snapshot (the film stays raw).
+    Denoise(bool),
 }
 
 /// What the UI shows after a pass.
@@ -57,6 +59,8 @@ pub struct Snapshot {
     pub noise_psnr_db: Option<f64>,
     /// Every pixel's spectrum, when the user asked to keep them.
     pub spectra: Option<Arc<crate::output::SpectralImage>>,
+    /// The denoised display image, when the user asked for it.
+    pub denoised: Option<Arc<Image>>,
 }
 
 /// Nearest-neighbour upscale of a preview to the full image size.
@@ -223,6 +227,7 @@ fn run(
     let mut probes: Vec<(u32, u32)> = Vec::new();
     let mut stop_after: Option<u64> = None;
     let mut keep_spectra = false;
+    let mut denoise = false;
     // Commands that arrived during a run: the run stops after its pass to handle them.
     let mut inbox: Vec<Command> = Vec::new();
     loop {
@@ -278,7 +283,7 @@ fn run(
                                 && generation == current.load(Ordering::SeqCst)
                             {
                                 let full = session.settings();
-                                let mut snap = snapshot(&quick, generation, started);
+                                let mut snap = snapshot(&quick, generation, started, false);
                                 snap.image =
                                     Arc::new(upscale(&quick.image(), full.width, full.height));
                                 snap.preview = true;
@@ -316,6 +321,22 @@ fn run(
                     }
                 }
                 Command::StopAfter(n) => stop_after = n,
+                Command::Denoise(on) => {
+                    denoise = on;
+                    // Show it now on the image already rendered.
+                    if let Some(j) = &job
+                        && j.session.stats().passes > 0
+                        && j.generation == current.load(Ordering::SeqCst)
+                    {
+                        let snap =
+                            pool.install(|| snapshot(&j.session, j.generation, j.started, denoise));
+                        *shared
+                            .snapshot
+                            .lock()
+                            .unwrap_or_else(PoisonError::into_inner) = Some(snap);
+                        repaint();
+                    }
+                }
                 Command::KeepSpectra(on) => {
                     keep_spectra = on;
                     if let Some(j) = &mut job
@@ -350,7 +371,7 @@ fn run(
                             .snapshot
                             .lock()
                             .unwrap_or_else(PoisonError::into_inner) =
-                            Some(snapshot(s, generation, started));
+                            Some(snapshot(s, generation, started, denoise));
                         repaint();
                     }
                     let next = rx.lock().unwrap_or_else(PoisonError::into_inner).try_recv();
@@ -391,7 +412,7 @@ fn run(
     }
 }
 
-fn snapshot(s: &RenderSession, generation: u64, started: Instant) -> Snapshot {
+fn snapshot(s: &RenderSession, generation: u64, started: Instant, denoise: bool) -> Snapshot {
     let image = Arc::new(s.image());
     let exposure = if s.emitter_pixels().len() == image.pixels.len() {
         crate::output::auto_exposure_skipping(&image, &s.emitter_pixels())
@@ -414,6 +435,10 @@ fn snapshot(s: &RenderSession, generation: u64, started: Instant) -> Snapshot {
         emitter_pixels: s.emitter_pixels(),
         since_start: started.elapsed().as_secs_f64(),
         preview: false,
+        denoised: denoise.then(|| {
+            let (w, h) = (s.settings().width, s.settings().height);
+            Arc::new(s.denoised(prismap_engine::render::DenoiseParams::for_size(w, h)))
+        }),
         spectra: s.spectral_film().map(|f| {
             Arc::new(crate::output::SpectralImage {
                 width: f.width(),

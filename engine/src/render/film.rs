@@ -93,6 +93,47 @@ impl Film {
         (self.sum.len() + self.odd.len()) * size_of::<[f64; 3]>()
     }
 
+    /// Per pixel, an estimate of the variance of the mean's luminance: from the odd and
+    /// even half-means A, B (E|A − B|² = σ²(1/a + 1/b), the mean's variance σ²/n), averaged
+    /// over the 3 × 3 neighbourhood (one pixel's |A − B|² alone is a one-sample estimate).
+    /// None before two passes.
+    pub fn luminance_variance(&self) -> Option<Vec<f32>> {
+        if self.passes < 2 {
+            return None;
+        }
+        let n = self.passes as f64;
+        let a = n.div_euclid(2.0) + (self.passes % 2) as f64;
+        let b = n - a;
+        let k = 1.0 / (n * (1.0 / a + 1.0 / b));
+        let lum = |c: [f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+        let raw: Vec<f64> = self
+            .sum
+            .iter()
+            .zip(&self.odd)
+            .map(|(s, o)| {
+                let odd = lum(*o) / a;
+                let even = (lum(*s) - lum(*o)) / b;
+                (odd - even).powi(2) * k
+            })
+            .collect();
+        let (w, h) = (self.width as usize, self.height as usize);
+        Some(
+            (0..w * h)
+                .map(|i| {
+                    let (x, y) = (i % w, i / w);
+                    let (mut sum, mut count) = (0.0, 0.0);
+                    for qy in y.saturating_sub(1)..(y + 2).min(h) {
+                        for qx in x.saturating_sub(1)..(x + 2).min(w) {
+                            sum += raw[qy * w + qx];
+                            count += 1.0;
+                        }
+                    }
+                    (sum / count) as f32
+                })
+                .collect(),
+        )
+    }
+
     /// An estimate, without a reference, of how far the image is from converged: the PSNR
     /// (the paper's equation 6, display values at `exposure`) of the mean over passes
     /// against its own expectation. The odd and the even passes give two independent

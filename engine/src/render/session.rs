@@ -104,6 +104,8 @@ pub struct RenderSession {
     typical: (f32, f32),
     /// Pixels whose centre sees an emitter directly (for exposure metering), once known.
     emitter_pixels: std::sync::OnceLock<Arc<Vec<bool>>>,
+    /// The denoiser's guides (first hits through pixel centres), once asked for.
+    guides: std::sync::OnceLock<Arc<super::denoise::Guides>>,
 }
 
 /// The global map's search cap, in typical radii and as a fraction of the scene diagonal
@@ -182,6 +184,7 @@ impl RenderSession {
             bytes_per_emitted: None,
             typical: (0.0, 0.0),
             emitter_pixels: std::sync::OnceLock::new(),
+            guides: std::sync::OnceLock::new(),
         }
     }
 
@@ -574,6 +577,25 @@ impl RenderSession {
                 Arc::new(mask)
             })
             .clone()
+    }
+
+    /// The denoiser's guide buffers (computed once per session, in parallel).
+    pub fn guides(&self) -> Arc<super::denoise::Guides> {
+        self.guides
+            .get_or_init(|| {
+                Arc::new(super::denoise::Guides::of(
+                    &self.scene,
+                    self.settings.width,
+                    self.settings.height,
+                ))
+            })
+            .clone()
+    }
+
+    /// A denoised copy of the current image, for display only (see [`super::denoise`]).
+    pub fn denoised(&self, params: super::denoise::DenoiseParams) -> Image {
+        let variance = self.film.luminance_variance();
+        super::denoise::denoise(&self.image(), variance.as_deref(), &self.guides(), params)
     }
 
     /// Bytes per stored photon in the latest pass (records + search structure).
