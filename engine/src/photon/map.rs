@@ -53,13 +53,13 @@ impl PhotonBatch {
         }
         self.headers.push(PhotonHeader::new(pos, normal));
         match (self.record, grid.smits()) {
-            (Record::Compact, Some(smits)) => {
+            (Record::Compact, Some(_)) => {
                 let rec = match spd::single_nonzero(flux) {
                     Some(bin) => {
                         self.spikes += 1;
                         encode_spike(bin, flux[bin])
                     }
-                    None => smits.encode(flux),
+                    None => grid.encode_triplet(flux),
                 };
                 self.flux.extend_from_slice(&rec);
             }
@@ -311,7 +311,7 @@ impl PhotonMap {
     /// so that each photon costs O(1).
     fn sum_flux(&self, grid: &BinGrid, ids: impl Iterator<Item = usize>, out: &mut [f32]) {
         match (self.record, grid.smits()) {
-            (Record::Compact, Some(smits)) => {
+            (Record::Compact, Some(smits)) if grid.smits_triplets() => {
                 let mut sums = BranchSums::default();
                 for i in ids {
                     let rec = [self.flux[3 * i], self.flux[3 * i + 1], self.flux[3 * i + 2]];
@@ -325,6 +325,32 @@ impl PhotonMap {
                     }
                 }
                 sums.expand_into(smits, out);
+            }
+            (Record::Compact, Some(_)) => {
+                // Colour triplets: summed, then decoded once.
+                let mut sum = [0.0f32; 3];
+                let mut any = false;
+                for i in ids {
+                    let rec = [self.flux[3 * i], self.flux[3 * i + 1], self.flux[3 * i + 2]];
+                    match decode_spike(rec) {
+                        Some((bin, a)) => {
+                            if let Some(v) = out.get_mut(bin) {
+                                *v += a;
+                            }
+                        }
+                        None => {
+                            any = true;
+                            for c in 0..3 {
+                                sum[c] += rec[c];
+                            }
+                        }
+                    }
+                }
+                if any {
+                    let mut decoded = vec![0.0f32; out.len()];
+                    grid.decode_triplet_into(sum, &mut decoded);
+                    spd::add_scaled(out, &decoded, 1.0);
+                }
             }
             _ => {
                 let s = self.stride;
@@ -358,8 +384,8 @@ impl PhotonMap {
             Record::Compact => match decode_spike([rec[0], rec[1], rec[2]]) {
                 Some((bin, a)) => out[bin] = a,
                 None => {
-                    if let Some(s) = grid.smits() {
-                        s.decode_into([rec[0], rec[1], rec[2]], out)
+                    if grid.smits().is_some() {
+                        grid.decode_triplet_into([rec[0], rec[1], rec[2]], out)
                     }
                 }
             },

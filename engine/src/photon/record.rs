@@ -38,8 +38,10 @@ pub enum Storage {
 pub enum Record {
     /// Every channel as an f32 (N bins, or the three RGB channels).
     Full,
-    /// Three f32: a Smits triplet whose decoded spectrum has the flux's colour, or the
-    /// spike `(-1, bin, amplitude)` for a single-bin flux. Needs a spectral grid.
+    /// Three f32: a triplet of the flux's colour — the paper's Smits triplet on grids with
+    /// Smits scene colours, else the linear-sRGB colour, decoded by Jakob–Hanika (see
+    /// [`crate::spectral::BinGrid::encode_triplet`]) — or the spike `(-1, bin, amplitude)`
+    /// for a single-bin flux. Needs a spectral grid.
     Compact,
 }
 

@@ -51,6 +51,8 @@ pub struct BinGrid {
     /// Wavelengths a bin's mean of a Jakob–Hanika texel is taken at, `per_bin` per bin
     /// with equal weights, bin after bin.
     texel_lambdas: Vec<f64>,
+    /// D65 normalised to Y = 1 at each of `texel_lambdas` (decoding a compact triplet).
+    texel_d65: Vec<f64>,
     per_bin: usize,
 }
 
@@ -98,6 +100,7 @@ impl BinGrid {
             smits: None,
             upsampling: Upsampling::default(),
             texel_lambdas: Vec::new(),
+            texel_d65: Vec::new(),
             per_bin: 0,
         };
         grid.smits = Some(SmitsBins::new(&grid));
@@ -120,6 +123,9 @@ impl BinGrid {
                 points.iter().map(move |u| a + u * width)
             })
             .collect();
+        // White light (1, 1, 1) is D65 with Y = 1 (a flat sigmoid of ½, scaled by 2).
+        let white = Spectrum::illuminant([1.0; 3]);
+        grid.texel_d65 = grid.texel_lambdas.iter().map(|&l| white.eval(l)).collect();
         Ok(grid)
     }
 
@@ -149,6 +155,7 @@ impl BinGrid {
             smits: None,
             upsampling: Upsampling::default(),
             texel_lambdas: Vec::new(),
+            texel_d65: Vec::new(),
             per_bin: 0,
         }
     }
@@ -161,6 +168,63 @@ impl BinGrid {
 
     pub fn upsampling(&self) -> Upsampling {
         self.upsampling
+    }
+
+    /// The triplet a compact record keeps for a smooth flux `spd`: the paper's Smits
+    /// triplet (its decoded spectrum has exactly the flux's colour while the flux is a
+    /// Smits spectrum) when scene colours are Smits-upsampled; else the flux's linear-sRGB
+    /// colour itself (negative channels, out of gamut, clamped), which
+    /// [`BinGrid::decode_triplet_into`] turns back into a smooth spectrum of that colour.
+    /// Spectral grids only.
+    pub fn encode_triplet(&self, spd: &[f32]) -> [f32; 3] {
+        match (&self.smits, self.upsampling) {
+            (Some(smits), Upsampling::Smits) => smits.encode(spd),
+            _ => self
+                .to_linear_srgb(spd)
+                .map(|v| if v > 0.0 { v } else { 0.0 }),
+        }
+    }
+
+    /// Whether compact triplets are Smits triplets (summed per Smits branch) on this grid.
+    pub fn smits_triplets(&self) -> bool {
+        self.smits.is_some() && self.upsampling == Upsampling::Smits
+    }
+
+    /// Writes the spectrum of a (non-Smits) compact triplet into `out`: Jakob–Hanika of
+    /// the colour as an emitter (scale × sigmoid × D65, pbrt-v4's illuminant form), bins
+    /// corrected so that their XYZ is the triplet's exactly. Triplets are linear, so a sum
+    /// of photons' triplets decodes as one.
+    pub fn decode_triplet_into(&self, rgb: [f32; 3], out: &mut [f32]) {
+        if let (Some(smits), Upsampling::Smits) = (&self.smits, self.upsampling) {
+            smits.decode_into(rgb, out);
+            return;
+        }
+        if self.smits.is_none() {
+            out.copy_from_slice(&rgb);
+            return;
+        }
+        let (scale, c) = super::jakob_hanika::illuminant_parts_from_table(rgb.map(f64::from));
+        if scale <= 0.0 {
+            out.fill(0.0);
+            return;
+        }
+        let k = scale / self.per_bin as f64;
+        for ((v, ls), ds) in out
+            .iter_mut()
+            .zip(self.texel_lambdas.chunks_exact(self.per_bin))
+            .zip(self.texel_d65.chunks_exact(self.per_bin))
+        {
+            let s: f64 = ls
+                .iter()
+                .zip(ds)
+                .map(|(&l, &d)| super::jakob_hanika::eval(c, l) * d)
+                .sum();
+            *v = (s * k) as f32;
+        }
+        let target = super::color::linear_srgb_to_xyz(rgb.map(f64::from));
+        if let Some(corrected) = self.match_colour(out, target) {
+            out.copy_from_slice(&corrected);
+        }
     }
 
     /// A reflectance colour per bin in [0, 1] (a texel's: the table's coefficients, no

@@ -450,6 +450,17 @@ pub fn illuminant_parts(rgb: [f64; 3]) -> (f64, [f64; 3]) {
     (scale, fit_exactly(rgb.map(|v| v / scale)))
 }
 
+/// [`illuminant_parts`] from the table alone (no refinement: fast enough per photon).
+pub fn illuminant_parts_from_table(rgb: [f64; 3]) -> (f64, [f64; 3]) {
+    let rgb = super::spectrum::clamp_rgb(rgb);
+    let peak = rgb.iter().fold(0.0f64, |m, &v| m.max(v));
+    if peak <= 0.0 {
+        return (0.0, [0.0, 0.0, 0.0]);
+    }
+    let scale = 2.0 * peak;
+    (scale, srgb_table().coeffs(rgb.map(|v| v / scale)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -142,16 +142,18 @@ fn compact_colour_error(g: &BinGrid, base: &[f32], refl: [f64; 3], bounces: usiz
     for _ in 0..bounces {
         spd::mul_assign(&mut s, &r);
     }
-    let x = smits.encode(&s);
+    let x = g.encode_triplet(&s);
     let a = g.to_linear_srgb(&s);
-    // The colour computed from the triplet equals the colour of its expansion.
     let mut back = vec![0.0; g.len()];
-    smits.decode_into(x, &mut back);
+    g.decode_triplet_into(x, &mut back);
     let b = g.to_linear_srgb(&back);
-    let direct = smits.colour_of(x);
     let scale = a.iter().fold(0.0f32, |m, v| m.max(v.abs())) as f64;
-    for c in 0..3 {
-        assert!((direct[c] - b[c] as f64).abs() <= 1e-4 * scale);
+    if g.smits_triplets() {
+        // The colour computed from the triplet equals the colour of its expansion.
+        let direct = smits.colour_of(x);
+        for c in 0..3 {
+            assert!((direct[c] - b[c] as f64).abs() <= 1e-4 * scale);
+        }
     }
     (0..3)
         .map(|c| (a[c] as f64 - b[c] as f64).abs())
@@ -179,23 +181,30 @@ fn compact_triplet_preserves_colour_exactly_inside_smits_gamut() {
 }
 
 #[test]
-fn compact_triplet_error_with_jakob_hanika_scene_colours() {
-    // Jakob–Hanika spectra are not Smits spectra: a photon's flux after a bounce is no
-    // longer exactly reachable by a Smits triplet, and the compact record keeps the
-    // nearest colour. Measured: 0 on the grey and red walls, 3.7–7.5 % of the largest
-    // channel on the green one (8–100 bins): the price of the paper's record on scenes
-    // whose colours are right.
-    let mut worst: f64 = 0.0;
-    for n in [8, 10, 20, 100] {
+fn compact_triplets_keep_the_colour_of_jakob_hanika_photons() {
+    // With Jakob–Hanika scene colours the paper's Smits triplet no longer fits (a photon
+    // after a bounce off the Cornell box's green wall came back 3.7–7.5 % off in colour),
+    // so compact records keep the flux's colour and decode it by Jakob–Hanika, corrected
+    // to that colour on the grid. One bounce: exact from 8 bins. Two and three bounces off
+    // the red and green walls leave the sRGB gamut (a channel would be negative), and the
+    // nearest colour is kept. Measured worst: 7.0 % from 10 bins, 17.6 % at 3–8 bins
+    // (Smits' triplets on Smits scenes: up to 31 %, see the next test).
+    for n in [3, 4, 8, 10, 20, 100] {
         let g = BinGrid::with_bins(n).unwrap();
+        assert!(!g.smits_triplets());
         let light = g.project(&Spectrum::illuminant([17.0, 12.0, 4.0]), Role::Emission);
         for refl in CORNELL {
-            let err = compact_colour_error(&g, &light, refl, 1);
-            println!("n={n} {refl:?}: {err:.4}");
-            worst = worst.max(err);
+            for bounces in 0..=3 {
+                let err = compact_colour_error(&g, &light, refl, bounces);
+                let bound = match (bounces, n) {
+                    (0..=1, 8..) => 1e-4,
+                    (_, 10..) => 0.075,
+                    _ => 0.18,
+                };
+                assert!(err < bound, "n={n} {refl:?}×{bounces}: {err}");
+            }
         }
     }
-    assert!(worst < 0.08, "{worst}");
 }
 
 #[test]
