@@ -692,6 +692,7 @@ impl ViewerApp {
             (Key::Num1, Storage::Full),
             (Key::Num2, Storage::Compact),
             (Key::Num3, Storage::Rgb),
+            (Key::Num4, Storage::Packed),
         ] {
             if pressed(k) && self.settings.storage != s {
                 self.settings.storage = s;

@@ -66,6 +66,7 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     for (s, (key, tip)) in Storage::ALL.into_iter().zip([
                         ("1", "Full: every stored photon keeps all N bins (N floats)"),
                         ("2", "Compact (Lai & Christensen): an RGB triplet, or a lossless (−1, bin, amplitude) spike for a single-wavelength photon — 3 floats at any N"),
+                        ("4", "Packed: compact in 32 bits (shared-exponent triplet, or a 12-bit bin and 19-bit amplitude) with a 16-bit normal — 19 bytes a photon at any N"),
                         ("3", "RGB: the plain RGB renderer, the baseline (no spectra, no dispersion)"),
                     ]) {
                         restart |= ui
@@ -239,7 +240,7 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 ui.small(format!("into {}/", app.save_dir.display()));
                 ui.separator();
                 compare_controls(app, ui);
-                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/3 storage · A auto bins · F freeze A · D denoised view");
+                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/4/3 full/compact/packed/rgb · A auto bins · F freeze A · D denoised view");
                 if restart {
                     app.act(Action::Restart);
                 }

@@ -116,8 +116,8 @@ impl IrradianceCache {
         // Smits triplets are kept as triplets (decoded per lookup at O(N)); colour
         // triplets would need a Jakob–Hanika decode per lookup, so their cache keeps N
         // floats per point (decoded once per point).
-        let record = if grid.smits_triplets() {
-            map.record()
+        let record = if grid.smits_triplets() && map.record() != Record::Full {
+            Record::Compact
         } else {
             Record::Full
         };

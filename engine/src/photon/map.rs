@@ -4,7 +4,10 @@
 use glam::Vec3;
 
 use super::kdtree;
-use super::record::{PhotonHeader, Record, decode_spike, encode_spike};
+use super::record::{
+    PhotonHeader, Record, decode_spike, encode_spike, oct_from_16, oct_to_16, pack_record,
+    unpack_record,
+};
 use crate::spectral::smits::BranchSums;
 use crate::spectral::{BinGrid, spd};
 
@@ -15,6 +18,8 @@ pub struct PhotonBatch {
     stride: usize,
     pub headers: Vec<PhotonHeader>,
     pub flux: Vec<f32>,
+    /// Packed records (packed storage only; `flux` is then empty).
+    pub packed: Vec<u32>,
     pub spikes: usize,
 }
 
@@ -32,6 +37,7 @@ impl PhotonBatch {
             stride: record.flux_stride(grid.len()),
             headers: Vec::new(),
             flux: Vec::new(),
+            packed: Vec::new(),
             spikes: 0,
         }
     }
@@ -53,7 +59,7 @@ impl PhotonBatch {
         }
         self.headers.push(PhotonHeader::new(pos, normal));
         match (self.record, grid.smits()) {
-            (Record::Compact, Some(_)) => {
+            (Record::Compact | Record::Packed, Some(_)) => {
                 let rec = match spd::single_nonzero(flux) {
                     Some(bin) => {
                         self.spikes += 1;
@@ -61,7 +67,11 @@ impl PhotonBatch {
                     }
                     None => grid.encode_triplet(flux),
                 };
-                self.flux.extend_from_slice(&rec);
+                if self.record == Record::Packed {
+                    self.packed.push(pack_record(rec));
+                } else {
+                    self.flux.extend_from_slice(&rec);
+                }
             }
             _ => self.flux.extend_from_slice(flux),
         }
@@ -69,12 +79,16 @@ impl PhotonBatch {
 
     /// Bytes these photons will take in a map (records + kd axis byte).
     pub fn memory_bytes(&self) -> usize {
+        if self.record == Record::Packed {
+            return self.headers.len() * super::record::PACKED_BYTES;
+        }
         self.headers.len() * (size_of::<PhotonHeader>() + 1) + self.flux.len() * 4
     }
 
     pub fn append(&mut self, mut other: PhotonBatch) {
         self.headers.append(&mut other.headers);
         self.flux.append(&mut other.flux);
+        self.packed.append(&mut other.packed);
         self.spikes += other.spikes;
     }
 }
@@ -131,8 +145,11 @@ pub struct PhotonMap {
     record: Record,
     stride: usize,
     positions: Vec<[f32; 3]>,
+    /// Octahedral normals in 2×16 bits (2×8 bits in `normals16` for packed records).
     normals: Vec<u32>,
+    normals16: Vec<u16>,
     flux: Vec<f32>,
+    packed: Vec<u32>,
     axes: Vec<u8>,
     spikes: usize,
 }
@@ -143,21 +160,30 @@ impl PhotonMap {
         let raw_pos: Vec<[f32; 3]> = batch.headers.iter().map(|h| h.pos).collect();
         let (order, axes) = kdtree::build_order(&raw_pos);
         let stride = batch.stride;
+        let packed_records = batch.record == Record::Packed;
         let mut positions = Vec::with_capacity(order.len());
-        let mut normals = Vec::with_capacity(order.len());
+        let (mut normals, mut normals16) = (Vec::new(), Vec::new());
         let mut flux = Vec::with_capacity(batch.flux.len());
+        let mut packed = Vec::with_capacity(batch.packed.len());
         for &i in &order {
             let i = i as usize;
             positions.push(raw_pos[i]);
-            normals.push(batch.headers[i].normal);
-            flux.extend_from_slice(&batch.flux[i * stride..(i + 1) * stride]);
+            if packed_records {
+                normals16.push(oct_to_16(batch.headers[i].normal));
+                packed.push(batch.packed[i]);
+            } else {
+                normals.push(batch.headers[i].normal);
+                flux.extend_from_slice(&batch.flux[i * stride..(i + 1) * stride]);
+            }
         }
         Self {
             record: batch.record,
             stride,
             positions,
             normals,
+            normals16,
             flux,
+            packed,
             axes,
             spikes: batch.spikes,
         }
@@ -182,7 +208,12 @@ impl PhotonMap {
 
     /// Exact bytes of the records and the search structure (kd axis bytes).
     pub fn memory_bytes(&self) -> usize {
-        self.positions.len() * 12 + self.normals.len() * 4 + self.flux.len() * 4 + self.axes.len()
+        self.positions.len() * 12
+            + self.normals.len() * 4
+            + self.normals16.len() * 2
+            + self.flux.len() * 4
+            + self.packed.len() * 4
+            + self.axes.len()
     }
 
     pub fn positions(&self) -> &[[f32; 3]] {
@@ -190,8 +221,22 @@ impl PhotonMap {
     }
 
     /// The octahedral code of stored photon `i`'s normal.
+    #[inline]
     pub fn normal_code(&self, i: usize) -> u32 {
-        self.normals[i]
+        match self.normals.get(i) {
+            Some(&n) => n,
+            None => oct_from_16(self.normals16[i]),
+        }
+    }
+
+    /// Stored photon `i`'s compact record (compact and packed storage).
+    #[inline]
+    fn compact_record(&self, i: usize) -> [f32; 3] {
+        if self.record == Record::Packed {
+            unpack_record(self.packed[i])
+        } else {
+            [self.flux[3 * i], self.flux[3 * i + 1], self.flux[3 * i + 2]]
+        }
     }
 
     /// Median distance from a spread of stored photons to their k-th nearest neighbour: a
@@ -230,7 +275,7 @@ impl PhotonMap {
         let d = Vec3::from_array(self.positions[i]) - p;
         let h = d.dot(n);
         h * h <= (1.0 / 64.0) * d.length_squared() + 1e-12
-            && super::record::oct_within(self.normals[i], n, MIN_NORMAL_COS)
+            && super::record::oct_within(self.normal_code(i), n, MIN_NORMAL_COS)
     }
 
     /// Adds to `out` (N bins) the flux of the photons of a density estimate at `p` on a
@@ -311,10 +356,10 @@ impl PhotonMap {
     /// so that each photon costs O(1).
     fn sum_flux(&self, grid: &BinGrid, ids: impl Iterator<Item = usize>, out: &mut [f32]) {
         match (self.record, grid.smits()) {
-            (Record::Compact, Some(smits)) if grid.smits_triplets() => {
+            (Record::Compact | Record::Packed, Some(smits)) if grid.smits_triplets() => {
                 let mut sums = BranchSums::default();
                 for i in ids {
-                    let rec = [self.flux[3 * i], self.flux[3 * i + 1], self.flux[3 * i + 2]];
+                    let rec = self.compact_record(i);
                     match decode_spike(rec) {
                         Some((bin, a)) => {
                             if let Some(v) = out.get_mut(bin) {
@@ -326,12 +371,12 @@ impl PhotonMap {
                 }
                 sums.expand_into(smits, out);
             }
-            (Record::Compact, Some(_)) => {
+            (Record::Compact | Record::Packed, Some(_)) => {
                 // Colour triplets: summed, then decoded once.
                 let mut sum = [0.0f32; 3];
                 let mut any = false;
                 for i in ids {
-                    let rec = [self.flux[3 * i], self.flux[3 * i + 1], self.flux[3 * i + 2]];
+                    let rec = self.compact_record(i);
                     match decode_spike(rec) {
                         Some((bin, a)) => {
                             if let Some(v) = out.get_mut(bin) {
@@ -378,14 +423,13 @@ impl PhotonMap {
     /// The flux of stored photon `i` in N bins (for tests and the probe).
     pub fn flux_of(&self, grid: &BinGrid, i: usize, out: &mut [f32]) {
         out.fill(0.0);
-        let rec = &self.flux[i * self.stride..(i + 1) * self.stride];
         match self.record {
-            Record::Full => out.copy_from_slice(rec),
-            Record::Compact => match decode_spike([rec[0], rec[1], rec[2]]) {
+            Record::Full => out.copy_from_slice(&self.flux[i * self.stride..(i + 1) * self.stride]),
+            Record::Compact | Record::Packed => match decode_spike(self.compact_record(i)) {
                 Some((bin, a)) => out[bin] = a,
                 None => {
                     if grid.smits().is_some() {
-                        grid.decode_triplet_into([rec[0], rec[1], rec[2]], out)
+                        grid.decode_triplet_into(self.compact_record(i), out)
                     }
                 }
             },

@@ -8,6 +8,13 @@
 //! | `full`    | position 3×f32, normal u32     | N × f32                           | u8      | 17 + 4N      |
 //! | `compact` | position 3×f32, normal u32     | 3 × f32: RGB triplet or spike     | u8      | 29           |
 //! | `rgb`     | position 3×f32, normal u32     | 3 × f32: linear sRGB              | u8      | 29           |
+//! | `packed`  | position 3×f32, normal u16     | u32: packed triplet or spike      | u8      | 19           |
+//!
+//! `packed` is `compact` in 32 bits (issue #14): a triplet as three 8-bit mantissas under
+//! one 7-bit shared exponent (2⁻⁶⁴…2⁶³, within 0.2 % of the largest channel), a spike as
+//! its 12-bit bin and a 7 + 12-bit float amplitude (within 1.3·10⁻⁴), the top bit telling
+//! them apart; the normal in 2×8-bit octahedral code (within 1.5°, against the 37° a
+//! density estimate allows).
 //!
 //! The normal is the landing surface's normal on the side the photon arrived from,
 //! octahedral-encoded in 2×16 bits (error < 0.01°). Lambertian surfaces need no incoming
@@ -29,6 +36,9 @@ pub enum Storage {
     Full,
     /// Spectral transport, Lai & Christensen's Algorithm 1: RGB triplet or lossless spike.
     Compact,
+    /// Compact records packed into 32 bits (19 bytes a photon with its position, normal
+    /// and kd byte): quantised triplet and spike amplitude.
+    Packed,
     /// The RGB renderer baseline: transport and storage in linear sRGB.
     Rgb,
 }
@@ -43,7 +53,13 @@ pub enum Record {
     /// [`crate::spectral::BinGrid::encode_triplet`]) — or the spike `(-1, bin, amplitude)`
     /// for a single-bin flux. Needs a spectral grid.
     Compact,
+    /// A compact record packed into one u32 (see [`pack_record`]), the normal in 16 bits.
+    Packed,
 }
+
+/// Bytes of a packed photon: position 12, normal 2, record 4, kd axis 1.
+pub const PACKED_BYTES: usize = 12 + 2 + 4 + 1;
+const _: () = assert!(PACKED_BYTES <= 20);
 
 impl Record {
     /// f32 flux values per photon for a grid of `channels` channels.
@@ -51,12 +67,16 @@ impl Record {
         match self {
             Record::Full => channels,
             Record::Compact => 3,
+            Record::Packed => 0,
         }
     }
 
     /// Exact bytes per stored photon (header + flux + kd axis byte).
     pub fn bytes_per_photon(self, channels: usize) -> usize {
-        size_of::<PhotonHeader>() + 4 * self.flux_stride(channels) + 1
+        match self {
+            Record::Packed => PACKED_BYTES,
+            _ => size_of::<PhotonHeader>() + 4 * self.flux_stride(channels) + 1,
+        }
     }
 }
 
@@ -66,14 +86,20 @@ impl Storage {
             Storage::Full => "full",
             Storage::Compact => "compact",
             Storage::Rgb => "rgb",
+            Storage::Packed => "packed",
         }
     }
 
-    pub const ALL: [Storage; 3] = [Storage::Full, Storage::Compact, Storage::Rgb];
+    pub const ALL: [Storage; 4] = [
+        Storage::Full,
+        Storage::Compact,
+        Storage::Packed,
+        Storage::Rgb,
+    ];
 
     pub fn transport(self) -> Transport {
         match self {
-            Storage::Full | Storage::Compact => Transport::Spectral,
+            Storage::Full | Storage::Compact | Storage::Packed => Transport::Spectral,
             Storage::Rgb => Transport::Rgb,
         }
     }
@@ -82,6 +108,7 @@ impl Storage {
         match self {
             Storage::Full | Storage::Rgb => Record::Full,
             Storage::Compact => Record::Compact,
+            Storage::Packed => Record::Packed,
         }
     }
 
@@ -106,7 +133,10 @@ impl std::str::FromStr for Storage {
             "full" => Ok(Storage::Full),
             "compact" => Ok(Storage::Compact),
             "rgb" => Ok(Storage::Rgb),
-            _ => Err(format!("unknown storage '{s}' (use full, compact or rgb)")),
+            "packed" => Ok(Storage::Packed),
+            _ => Err(format!(
+                "unknown storage '{s}' (use full, compact, packed or rgb)"
+            )),
         }
     }
 }
@@ -156,6 +186,107 @@ pub fn encode_spike(bin: usize, amplitude: f32) -> [f32; 3] {
 #[inline]
 pub fn decode_spike(rec: [f32; 3]) -> Option<(usize, f32)> {
     (rec[0] < 0.0).then_some((rec[1] as usize, rec[2]))
+}
+
+const PACK_SPIKE: u32 = 1 << 31;
+const EXP_BIAS: i32 = 64;
+
+/// 2^e as an f32 for e in −126…127 (0 below, ∞ above).
+#[inline]
+fn exp2i(e: i32) -> f32 {
+    if e < -126 {
+        0.0
+    } else if e > 127 {
+        f32::INFINITY
+    } else {
+        f32::from_bits(((e + 127) as u32) << 23)
+    }
+}
+
+/// A compact record (triplet ≥ 0, or spike) in 32 bits. Triplet: bit 31 clear, a 7-bit
+/// exponent E (bias 64) and three 8-bit mantissas mᵢ: cᵢ = mᵢ·2^(E−64−8), E chosen so the
+/// largest channel's mantissa is 128–255 (rounded to nearest). Spike: bit 31 set, bin in
+/// bits 19–30, amplitude as a 7-bit exponent (bias 64) and a 12-bit mantissa with a
+/// hidden one. Values beyond 2⁶³ saturate; below 2⁻⁶⁴ they round to 0.
+pub fn pack_record(rec: [f32; 3]) -> u32 {
+    if let Some((bin, a)) = decode_spike(rec) {
+        let bin = (bin as u32).min(0xFFF);
+        if !(a > 0.0) {
+            return PACK_SPIKE | (bin << 19);
+        }
+        let mut e = a.log2().floor() as i32;
+        let mut m = ((a / exp2i(e) - 1.0) * 4096.0).round() as i32;
+        if m >= 4096 {
+            m = 0;
+            e += 1;
+        }
+        if e + EXP_BIAS < 0 {
+            return PACK_SPIKE | (bin << 19);
+        }
+        let (e, m) = if e + EXP_BIAS > 127 {
+            (127 - EXP_BIAS, 4095)
+        } else {
+            (e, m)
+        };
+        return PACK_SPIKE | (bin << 19) | (((e + EXP_BIAS) as u32) << 12) | m as u32;
+    }
+    let rec = rec.map(|c| if c > 0.0 && c.is_finite() { c } else { 0.0 });
+    let peak = rec[0].max(rec[1]).max(rec[2]);
+    if peak <= 0.0 {
+        return 0;
+    }
+    // peak in [2^(E−1), 2^E): its mantissa peak·2^(8−E) in [128, 256).
+    let mut e = peak.log2().floor() as i32 + 1;
+    let quant = |e: i32| rec.map(|c| (c * exp2i(8 - e)).round() as u32);
+    let mut m = quant(e);
+    if m.iter().any(|&v| v > 255) {
+        e += 1;
+        m = quant(e);
+    }
+    if e + EXP_BIAS < 0 {
+        return 0;
+    }
+    if e + EXP_BIAS > 127 {
+        return (127 << 24) | 0xFF_FFFF;
+    }
+    (((e + EXP_BIAS) as u32) << 24) | (m[0].min(255) << 16) | (m[1].min(255) << 8) | m[2].min(255)
+}
+
+/// The compact record a packed word holds (a triplet, or the spike `(-1, bin, amplitude)`).
+#[inline]
+pub fn unpack_record(w: u32) -> [f32; 3] {
+    if w & PACK_SPIKE != 0 {
+        let bin = (w >> 19) & 0xFFF;
+        let e = ((w >> 12) & 0x7F) as i32 - EXP_BIAS;
+        let m = w & 0xFFF;
+        let a = if w & 0x7FFFF == 0 {
+            0.0
+        } else {
+            exp2i(e) * (1.0 + m as f32 / 4096.0)
+        };
+        return encode_spike(bin as usize, a);
+    }
+    let k = exp2i(((w >> 24) & 0x7F) as i32 - EXP_BIAS - 8);
+    [
+        ((w >> 16) & 0xFF) as f32 * k,
+        ((w >> 8) & 0xFF) as f32 * k,
+        (w & 0xFF) as f32 * k,
+    ]
+}
+
+/// A 2×16-bit octahedral code rounded to 2×8 bits (the packed record's normal).
+#[inline]
+pub fn oct_to_16(e: u32) -> u16 {
+    let q = |v: u32| ((v as f32 / 65535.0 * 255.0).round() as u16).min(255);
+    q(e & 0xFFFF) | (q(e >> 16) << 8)
+}
+
+/// The 2×16-bit code of a 2×8-bit one.
+#[inline]
+pub fn oct_from_16(c: u16) -> u32 {
+    let u = (c & 0xFF) as u32 * 257;
+    let v = (c >> 8) as u32 * 257;
+    u | (v << 16)
 }
 
 /// Octahedral encoding of a unit vector in 2×16 bits.
@@ -231,7 +362,44 @@ mod tests {
     }
 
     #[test]
+    fn packed_records_round_trip_within_their_precision() {
+        let mut rng = Rng::stream(3, 0, 0, Purpose::Photon);
+        for scale in [1e-15f32, 1e-6, 1e-3, 1.0, 37.0, 1e6, 1e18] {
+            for _ in 0..2_000 {
+                let [a, b] = rng.next_2d();
+                let [c, _] = rng.next_2d();
+                let rec = [a * scale, b * scale * 0.3, c * c * scale];
+                let back = unpack_record(pack_record(rec));
+                let peak = rec[0].max(rec[1]).max(rec[2]);
+                for k in 0..3 {
+                    assert!(
+                        (back[k] - rec[k]).abs() <= peak * (0.5 / 128.0) * 1.01,
+                        "{rec:?} → {back:?}"
+                    );
+                }
+            }
+        }
+        assert_eq!(unpack_record(pack_record([0.0; 3])), [0.0; 3]);
+        for bin in [0usize, 1, 99, 999, 4095] {
+            for amp in [1e-18f32, 1e-5, 0.37, 1.0, 12345.678, 1e18] {
+                let (b, a) = decode_spike(unpack_record(pack_record(encode_spike(bin, amp))))
+                    .expect("a spike stays a spike");
+                assert_eq!(b, bin);
+                assert!(((a - amp) / amp).abs() <= 1.25e-4, "{amp} → {a}");
+            }
+        }
+        // Normals to 8 bits a component: within 1.5°.
+        for _ in 0..10_000 {
+            let d = uniform_sphere(rng.next_2d());
+            let back = oct_decode(oct_from_16(oct_to_16(oct_encode(d))));
+            assert!(d.dot(back) > 1.5f32.to_radians().cos(), "{d} {back}");
+        }
+    }
+
+    #[test]
     fn storage_sizes_are_as_documented() {
+        assert_eq!(Storage::Packed.bytes_per_photon(4), 19);
+        assert_eq!(Storage::Packed.bytes_per_photon(4096), 19);
         assert_eq!(Storage::Compact.bytes_per_photon(4), 29);
         assert_eq!(Storage::Compact.bytes_per_photon(1000), 29);
         assert_eq!(Storage::Rgb.bytes_per_photon(100), 29);
