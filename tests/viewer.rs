@@ -455,3 +455,54 @@ fn a_file_that_fails_to_open_is_reported_as_an_error() {
     assert!(app.status.contains("no/such/scene.gltf"), "{}", app.status);
     assert_eq!(*app.source(), SceneSource::Builtin("cornell-box".into()));
 }
+
+#[test]
+fn f1_opens_the_keyboard_help_listing_every_shortcut() {
+    // Issue #13: shortcuts listed in a help overlay (F1 or ?), closed by Escape.
+    let mut h = harness("cornell-box");
+    h.step();
+    assert!(h.query_by_label("Keyboard shortcuts").is_none());
+    h.key_press(egui::Key::F1);
+    h.run_steps(2);
+    assert!(h.state().show_help);
+    h.get_by_label("Keyboard shortcuts");
+    for (key, what) in prismap::app::panels::SHORTCUTS {
+        assert!(h.query_all_by_label(key).next().is_some(), "{key}");
+        h.get_by_label(what);
+    }
+    h.key_press(egui::Key::Escape);
+    h.run_steps(2);
+    assert!(!h.state().show_help);
+    assert!(h.query_by_label("Keyboard shortcuts").is_none());
+}
+
+#[test]
+fn the_main_controls_explain_themselves_on_hover() {
+    // Issue #13: a tooltip on every control. Each of these, hovered, shows its sentence.
+    let mut h = harness("cornell-box");
+    h.ctx
+        .global_style_mut(|s| s.interaction.tooltip_delay = 0.0);
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    for (control, tip) in [
+        ("full", "every stored photon keeps all N bins"),
+        ("compact", "lossless (−1, bin, amplitude) spike"),
+        ("packed", "19 bytes a photon"),
+        ("rgb", "the plain RGB renderer"),
+        ("Jakob–Hanika 2019", "exactly the colours the scene gives"),
+        ("Smits 1999", "extra blue"),
+        ("auto", "Bins chosen for the scene"),
+        ("Denoised view", "Display only"),
+        ("Keep spectra", "4 bytes per bin per pixel"),
+        ("stop there", "Pause when the target is reached"),
+        ("Freeze as A", ""),
+    ] {
+        h.get_by_label(control).hover();
+        h.run_steps(3);
+        if !tip.is_empty() {
+            assert!(
+                h.query_by_label_contains(tip).is_some(),
+                "hovering {control:?} shows no tooltip containing {tip:?}"
+            );
+        }
+    }
+}

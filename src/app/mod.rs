@@ -7,7 +7,7 @@
 
 pub mod compare;
 mod orbit;
-mod panels;
+pub mod panels;
 pub use panels::format_bytes;
 pub mod worker;
 
@@ -134,6 +134,8 @@ pub struct ViewerApp {
     pub keep_spectra: bool,
     /// Whether the image shown is the denoised view (display only).
     pub denoise_view: bool,
+    /// Whether the keyboard help is open (F1 or ?).
+    pub show_help: bool,
     /// The noise level (PSNR of the "noise left" estimate, dB) that counts as converged.
     pub target_db: f64,
     /// Pause when the target is reached.
@@ -208,6 +210,7 @@ impl ViewerApp {
             save_dir: default_save_dir(),
             keep_spectra: false,
             denoise_view: false,
+            show_help: false,
             target_db: DEFAULT_TARGET_DB,
             stop_at_target: false,
             target_reached: None,
@@ -656,6 +659,7 @@ impl ViewerApp {
         panels::statistics(self, ui);
         panels::probe(self, ui);
         panels::image(self, ui);
+        panels::help(self, &ctx);
         self.apply_actions(&ctx);
         self.drive_capture(&ctx);
     }
@@ -687,6 +691,18 @@ impl ViewerApp {
         }
         if pressed(Key::D) {
             self.set_denoise_view(!self.denoise_view);
+        }
+        if pressed(Key::F1)
+            || ctx.input(|i| {
+                i.events
+                    .iter()
+                    .any(|e| matches!(e, egui::Event::Text(t) if t == "?"))
+            })
+        {
+            self.show_help = !self.show_help;
+        }
+        if pressed(Key::Escape) {
+            self.show_help = false;
         }
         for (k, s) in [
             (Key::Num1, Storage::Full),

@@ -240,7 +240,7 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 ui.small(format!("into {}/", app.save_dir.display()));
                 ui.separator();
                 compare_controls(app, ui);
-                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/4/3 full/compact/packed/rgb · A auto bins · F freeze A · D denoised view");
+                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/4/3 full/compact/packed/rgb · A auto bins · F freeze A · D denoised view · F1 or ? all keys");
                 if restart {
                     app.act(Action::Restart);
                 }
@@ -762,6 +762,45 @@ fn export_csv(
     })
     .map_err(|e| e.to_string())?;
     Ok(path)
+}
+
+/// The keyboard shortcuts, one per line (the help overlay and its test read this list).
+pub const SHORTCUTS: [(&str, &str); 14] = [
+    ("space", "pause / resume refining"),
+    ("R", "restart from one pass"),
+    ("V", "back to the scene's camera"),
+    ("S", "save a PNG (as shown)"),
+    ("E", "save an EXR (linear)"),
+    ("1", "full storage (N floats a photon)"),
+    ("2", "compact storage (triplet or spike)"),
+    ("4", "packed storage (compact in 19 bytes)"),
+    ("3", "RGB renderer (the baseline)"),
+    ("A", "bins chosen for the scene"),
+    ("F", "freeze the image as A / leave compare mode"),
+    ("D", "denoised view (display only)"),
+    ("F1 or ?", "this help"),
+    ("Esc", "close this help"),
+];
+
+/// The help overlay: what each key does.
+pub fn help(app: &mut ViewerApp, ctx: &egui::Context) {
+    let mut open = app.show_help;
+    egui::Window::new("Keyboard shortcuts")
+        .open(&mut open)
+        .collapsible(false)
+        .resizable(false)
+        .anchor(egui::Align2::CENTER_CENTER, egui::Vec2::ZERO)
+        .show(ctx, |ui| {
+            egui::Grid::new("shortcuts").num_columns(2).striped(true).show(ui, |ui| {
+                for (key, what) in SHORTCUTS {
+                    ui.strong(key);
+                    ui.label(what);
+                    ui.end_row();
+                }
+            });
+            ui.small("Drag to orbit, Shift-drag or right-drag to pan, scroll to zoom; click the image to probe a pixel. Keys work when no text field has focus.");
+        });
+    app.show_help = open && app.show_help;
 }
 
 pub fn image(app: &mut ViewerApp, ui: &mut egui::Ui) {
