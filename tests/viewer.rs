@@ -506,3 +506,35 @@ fn the_main_controls_explain_themselves_on_hover() {
         }
     }
 }
+
+fn harness_sized(scene: &str, w: f32, h: f32) -> Harness<'static, ViewerApp> {
+    let ctx = egui::Context::default();
+    let app = ViewerApp::new(&ctx, SceneSource::Builtin(scene.into()), settings(), None);
+    Harness::builder()
+        .with_size(egui::vec2(w, h))
+        .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app)
+}
+
+#[test]
+fn every_panel_is_reachable_at_800x500_and_whole_at_1920x1080() {
+    // Issue #13: nothing clipped in a small window (the side panels scroll to their last
+    // control) and nothing needs scrolling in a large one.
+    let last_controls = ["Save PNG", "Freeze as A", "stop there", "process resident"];
+    for (w, h, scroll) in [(800.0, 500.0, true), (1920.0, 1080.0, false)] {
+        let mut harness = harness_sized("cornell-box", w, h);
+        wait_until(&mut harness, "a first pass", |a| passes(a) >= 1);
+        harness.run_steps(3);
+        let screen = egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(w, h));
+        for label in last_controls {
+            if scroll {
+                harness.get_by_label(label).scroll_to_me();
+                harness.run_steps(3);
+            }
+            let r = harness.get_by_label(label).rect();
+            assert!(
+                screen.contains_rect(r),
+                "{w}×{h}: {label:?} at {r:?} is outside the window"
+            );
+        }
+    }
+}
