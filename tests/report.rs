@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use prismap::report::{BINS, Plan, Report};
+use prismap::report::{BINS, PACKED_BINS, Plan, Report};
 
 #[test]
 fn tiny_report_has_every_row_column_and_plot() {
@@ -27,8 +27,8 @@ fn tiny_report_has_every_row_column_and_plot() {
         quick: true,
     };
     let runs = report.run().unwrap();
-    // 7 bins × 2 storages + rgb, in two modes, plus 4 budget runs.
-    assert_eq!(runs.len(), 2 * (2 * BINS.len() + 1) + 4);
+    // 7 bins × 2 storages + rgb + packed at 2 bin counts, in two modes, plus 4 budget runs.
+    assert_eq!(runs.len(), 2 * (2 * BINS.len() + 1 + PACKED_BINS.len()) + 4);
     let csv = std::fs::read_to_string(out.join("runs.csv")).unwrap();
     let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
     for col in [
@@ -70,6 +70,12 @@ fn tiny_report_has_every_row_column_and_plot() {
         );
     }
     assert!(md.contains("\n| RGB | "));
+    // Issue #14: packed records beside compact, with their 19 bytes a photon.
+    assert!(
+        md.contains("Packed records (19 bytes a photon)"),
+        "no packed table"
+    );
+    assert_eq!(bpp("packed", 20), 19.0);
     for f in ["convergence-cornell-box.png", "memory-cornell-box.png"] {
         let img = image::open(out.join(f)).unwrap();
         assert_eq!((img.width(), img.height()), (900, 560), "{f}");

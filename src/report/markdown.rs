@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use super::{BINS, PAPER_TABLE1, PAPER_TABLE1_RGB, Report, ReportError, Run, db};
+use super::{BINS, PACKED_BINS, PAPER_TABLE1, PAPER_TABLE1_RGB, Report, ReportError, Run, db};
 use crate::metrics::psnr;
 use crate::output::read_exr;
 use crate::spectral::{BinGrid, Role, Spectrum};
@@ -38,6 +38,7 @@ impl Report {
             md += &self.equal_photons(&r);
             md += &self.equal_time(&r);
             md += &checks(&r);
+            md += &packed(&r);
             md += &self.budget_section(scene, budget);
             md += &colour_at_few_bins(scene);
             let _ = writeln!(md, "![convergence](convergence-{scene}.png)\n");
@@ -251,6 +252,42 @@ fn paper_columns(bins: usize) -> String {
             format!(" {full} | {:.2} dB |", t.2)
         })
         .unwrap_or_default()
+}
+
+/// Packed records (issue #14) beside Algorithm 1's compact ones: error, memory, time.
+fn packed(r: &SceneRuns) -> String {
+    let mut md = String::from(
+        "Packed records (19 bytes a photon) beside compact (Algorithm 1), equal photons:\n\n\
+         | bins | compact PSNR | packed PSNR | Δ | compact maps | packed maps | compact s | packed s |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    let mut any = false;
+    for b in PACKED_BINS {
+        let (Some(c), Some(p)) = (
+            r.get("equal-photons", "compact", b),
+            r.get("equal-photons", "packed", b),
+        ) else {
+            continue;
+        };
+        any = true;
+        let _ = writeln!(
+            md,
+            "| {b} | {} | {} | {:+.3} dB | {:.2} MB | {:.2} MB | {:.2} | {:.2} |",
+            db(c.psnr_db),
+            db(p.psnr_db),
+            p.psnr_db - c.psnr_db,
+            c.photon_map_bytes as f64 / 1e6,
+            p.photon_map_bytes as f64 / 1e6,
+            c.seconds,
+            p.seconds
+        );
+    }
+    if any {
+        md.push('\n');
+        md
+    } else {
+        String::new()
+    }
 }
 
 /// The checks the report exists for, computed from the runs.

@@ -24,6 +24,8 @@ use child::{Job, Limit};
 
 /// The bin counts of the paper's tables.
 pub const BINS: [usize; 7] = crate::spectral::PAPER_BINS;
+/// Bin counts the packed records are measured at, beside compact.
+pub const PACKED_BINS: [usize; 2] = [20, 100];
 
 /// The paper's Table 1 (blackbody Cornell box): bins, full PSNR, compact PSNR (dB).
 pub const PAPER_TABLE1: [(usize, f64, f64); 7] = [
@@ -267,6 +269,10 @@ impl Report {
             configs.push((b, Storage::Compact));
         }
         configs.push((3, Storage::Rgb));
+        // Issue #14's smaller records beside Algorithm 1, at the bin counts users pick.
+        for b in PACKED_BINS {
+            configs.push((b, Storage::Packed));
+        }
         let mut runs = Vec::new();
         for (mode, limit) in [
             ("equal-photons", Limit::Passes(self.plan.passes)),

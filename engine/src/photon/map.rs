@@ -50,6 +50,16 @@ impl PhotonBatch {
         self.headers.is_empty()
     }
 
+    /// Room for `photons` more photons without reallocating.
+    pub fn reserve(&mut self, photons: usize) {
+        self.headers.reserve(photons);
+        if self.record == Record::Packed {
+            self.packed.reserve(photons);
+        } else {
+            self.flux.reserve(photons * self.stride);
+        }
+    }
+
     /// Stores a photon's flux in this batch's format, with the landing surface's normal
     /// turned towards the side the photon came from. Photons with no (or non-finite) flux
     /// are never stored.

@@ -114,6 +114,12 @@ pub fn trace_photons(
     }
     let mut global = PhotonBatch::new(settings.record, &scene.grid);
     let mut caustics = PhotonBatch::new(settings.record, &scene.grid);
+    // One allocation each (growing by doubling faulted in fresh pages every pass).
+    let count = |pick: fn(&(PhotonBatch, PhotonBatch, u64)) -> usize| {
+        results.iter().flatten().map(pick).sum::<usize>()
+    };
+    global.reserve(count(|r| r.0.len()));
+    caustics.reserve(count(|r| r.1.len()));
     let mut splits = 0;
     for r in results {
         let (g, c, s) = r.ok_or(TraceStop::Cancelled)?;
