@@ -49,7 +49,8 @@ pub struct RenderArgs {
     /// Wavelength bins (1–4096; ignored by --storage rgb).
     #[arg(long)]
     pub bins: Option<usize>,
-    /// Photon storage: full (N floats), compact (RGB triplet or spike) or rgb (RGB renderer).
+    /// Photon storage: full (N floats), compact (RGB triplet or spike), packed (compact in
+    /// 19 bytes a photon) or rgb (RGB renderer).
     #[arg(long, value_parser = parse_storage)]
     pub storage: Option<Storage>,
     /// How scene colours become spectra: jh (Jakob–Hanika 2019, the colour as given) or

@@ -441,24 +441,22 @@ fn fitter() -> &'static Fitter {
 /// is `scale · s(λ) · D65(λ)/Y(D65)`, with `s` the sigmoid of the colour divided by
 /// twice its largest channel (so it stays well inside the table, at most ½).
 pub fn illuminant_parts(rgb: [f64; 3]) -> (f64, [f64; 3]) {
+    illuminant_parts_by(rgb, fit_exactly)
+}
+
+fn illuminant_parts_by(rgb: [f64; 3], coeffs: impl Fn([f64; 3]) -> [f64; 3]) -> (f64, [f64; 3]) {
     let rgb = super::spectrum::clamp_rgb(rgb);
     let peak = rgb.iter().fold(0.0f64, |m, &v| m.max(v));
     if peak <= 0.0 {
         return (0.0, [0.0, 0.0, 0.0]);
     }
     let scale = 2.0 * peak;
-    (scale, fit_exactly(rgb.map(|v| v / scale)))
+    (scale, coeffs(rgb.map(|v| v / scale)))
 }
 
 /// [`illuminant_parts`] from the table alone (no refinement: fast enough per photon).
 pub fn illuminant_parts_from_table(rgb: [f64; 3]) -> (f64, [f64; 3]) {
-    let rgb = super::spectrum::clamp_rgb(rgb);
-    let peak = rgb.iter().fold(0.0f64, |m, &v| m.max(v));
-    if peak <= 0.0 {
-        return (0.0, [0.0, 0.0, 0.0]);
-    }
-    let scale = 2.0 * peak;
-    (scale, srgb_table().coeffs(rgb.map(|v| v / scale)))
+    illuminant_parts_by(rgb, |c| srgb_table().coeffs(c))
 }
 
 #[cfg(test)]
