@@ -404,7 +404,14 @@ fn compare_mode_keeps_a_while_b_switches_storage() {
     // ΔE2000); the difference view is drawn from both.
     let mut h = harness("prism");
     h.state_mut().set_probe((20, 20));
-    wait_until(&mut h, "two full passes", |a| passes(a) >= 2);
+    // The worker may already be rendering when the probe is set: wait for passes that
+    // carry it.
+    wait_until(&mut h, "two full passes with the probe", |a| {
+        passes(a) >= 2
+            && a.snapshot
+                .as_ref()
+                .is_some_and(|s| s.probes.iter().any(|p| (p.x, p.y) == (20, 20)))
+    });
     h.key_press(egui::Key::F);
     h.step();
     let a = h.state().compare.clone().expect("F froze A");

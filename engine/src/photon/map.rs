@@ -11,6 +11,11 @@ use super::record::{
 use crate::spectral::smits::BranchSums;
 use crate::spectral::{BinGrid, spd};
 
+thread_local! {
+    /// A decoded colour triplet (N bins), reused by every estimate on this thread.
+    static DECODED: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
 /// Photons as the tracer produces them, not yet searchable.
 #[derive(Clone, Debug)]
 pub struct PhotonBatch {
@@ -361,9 +366,9 @@ impl PhotonMap {
         }
     }
 
-    /// Adds the flux of photons `ids` to `out` (N bins). Compact records are expanded as
-    /// the paper prescribes (spike → its bin; triplet → Smits), summed per Smits branch
-    /// so that each photon costs O(1).
+    /// Adds the flux of photons `ids` to `out` (N bins). Compact and packed records: a
+    /// spike goes to its bin; Smits triplets are summed per Smits branch and expanded as
+    /// the paper prescribes, colour triplets are summed and decoded once — O(1) a photon.
     fn sum_flux(&self, grid: &BinGrid, ids: impl Iterator<Item = usize>, out: &mut [f32]) {
         match (self.record, grid.smits()) {
             (Record::Compact | Record::Packed, Some(smits)) if grid.smits_triplets() => {
@@ -402,9 +407,11 @@ impl PhotonMap {
                     }
                 }
                 if any {
-                    let mut decoded = vec![0.0f32; out.len()];
-                    grid.decode_triplet_into(sum, &mut decoded);
-                    spd::add_scaled(out, &decoded, 1.0);
+                    DECODED.with_borrow_mut(|decoded| {
+                        decoded.resize(out.len(), 0.0);
+                        grid.decode_triplet_into(sum, decoded);
+                        spd::add_scaled(out, decoded, 1.0);
+                    });
                 }
             }
             _ => {
@@ -435,14 +442,17 @@ impl PhotonMap {
         out.fill(0.0);
         match self.record {
             Record::Full => out.copy_from_slice(&self.flux[i * self.stride..(i + 1) * self.stride]),
-            Record::Compact | Record::Packed => match decode_spike(self.compact_record(i)) {
-                Some((bin, a)) => out[bin] = a,
-                None => {
-                    if grid.smits().is_some() {
-                        grid.decode_triplet_into(self.compact_record(i), out)
+            Record::Compact | Record::Packed => {
+                let rec = self.compact_record(i);
+                match decode_spike(rec) {
+                    Some((bin, a)) => out[bin] = a,
+                    None => {
+                        if grid.smits().is_some() {
+                            grid.decode_triplet_into(rec, out)
+                        }
                     }
                 }
-            },
+            }
         }
     }
 }

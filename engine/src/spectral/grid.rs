@@ -208,22 +208,29 @@ impl BinGrid {
             out.fill(0.0);
             return;
         }
-        let k = scale / self.per_bin as f64;
-        for ((v, ls), ds) in out
-            .iter_mut()
-            .zip(self.texel_lambdas.chunks_exact(self.per_bin))
-            .zip(self.texel_d65.chunks_exact(self.per_bin))
-        {
-            let s: f64 = ls
-                .iter()
-                .zip(ds)
-                .map(|(&l, &d)| super::jakob_hanika::eval(c, l) * d)
-                .sum();
-            *v = (s * k) as f32;
-        }
+        self.sigmoid_bin_means(c, scale, Some(&self.texel_d65), out);
         let target = super::color::linear_srgb_to_xyz(rgb.map(f64::from));
-        if let Some(corrected) = self.match_colour(out, target) {
-            out.copy_from_slice(&corrected);
+        self.match_colour(out, target);
+    }
+
+    /// Bin means of `scale` × the sigmoid of `c` (× `weights` at the same wavelengths, if
+    /// given), from the grid's per-bin sample wavelengths.
+    fn sigmoid_bin_means(&self, c: [f64; 3], scale: f64, weights: Option<&[f64]>, out: &mut [f32]) {
+        let k = scale / self.per_bin as f64;
+        for (b, v) in out.iter_mut().enumerate() {
+            let at = b * self.per_bin..(b + 1) * self.per_bin;
+            let s: f64 = match weights {
+                Some(w) => self.texel_lambdas[at.clone()]
+                    .iter()
+                    .zip(&w[at])
+                    .map(|(&l, &d)| super::jakob_hanika::eval(c, l) * d)
+                    .sum(),
+                None => self.texel_lambdas[at]
+                    .iter()
+                    .map(|&l| super::jakob_hanika::eval(c, l))
+                    .sum(),
+            };
+            *v = (s * k) as f32;
         }
     }
 
@@ -248,17 +255,7 @@ impl BinGrid {
             }
             (Some(_), Upsampling::JakobHanika) => {
                 let c = super::jakob_hanika::srgb_table().coeffs(rgb.map(f64::from));
-                let k = 1.0 / self.per_bin as f64;
-                for (v, ls) in out
-                    .iter_mut()
-                    .zip(self.texel_lambdas.chunks_exact(self.per_bin))
-                {
-                    *v = (ls
-                        .iter()
-                        .map(|&l| super::jakob_hanika::eval(c, l))
-                        .sum::<f64>()
-                        * k) as f32;
-                }
+                self.sigmoid_bin_means(c, 1.0, None, out);
             }
         }
     }
@@ -342,7 +339,7 @@ impl BinGrid {
             .map(|v| if v.is_finite() && v > 0.0 { v } else { 0.0 })
             .collect();
         if self.transport == Transport::Spectral && role == Role::Emission {
-            self.keep_luminance(s, &mut values);
+            self.keep_colour(s, &mut values);
         }
         values
     }
@@ -361,17 +358,12 @@ impl BinGrid {
     /// With Smits upsampling (the paper's setting) only the luminance is kept, as the paper
     /// did: its compact records decode a photon after one bounce to exactly its colour only
     /// while the light stays a Smits spectrum.
-    fn keep_luminance(&self, s: &Spectrum, values: &mut [f32]) {
+    fn keep_colour(&self, s: &Spectrum, values: &mut [f32]) {
         let exact = s.xyz();
         if !exact.iter().all(|v| v.is_finite()) {
             return;
         }
-        let matched = match self.upsampling {
-            Upsampling::JakobHanika => self.match_colour(values, exact),
-            Upsampling::Smits => None,
-        };
-        if let Some(corrected) = matched {
-            values.copy_from_slice(&corrected);
+        if self.upsampling == Upsampling::JakobHanika && self.match_colour(values, exact) {
             return;
         }
         let on_grid = self.to_xyz(values)[1];
@@ -383,46 +375,35 @@ impl BinGrid {
         }
     }
 
-    /// `values` scaled per bin by `1 + wᵢ·k` so that their XYZ is `target`, if that is a
-    /// correction within ±50 % everywhere.
-    fn match_colour(&self, values: &[f32], target: [f64; 3]) -> Option<Vec<f32>> {
+    /// Scales `values` per bin by `1 + wᵢ·k` so that their XYZ is `target`, if that is a
+    /// correction within ±50 % everywhere (else leaves them and returns false: fewer than
+    /// 3 bins, or a spike in one or two, make the system singular or the factors wild).
+    fn match_colour(&self, values: &mut [f32], target: [f64; 3]) -> bool {
         if values.len() < 3 {
-            return None;
+            return false;
         }
         let got = self.to_xyz(values);
         // M k = target − got, with M = Σᵢ vᵢ wᵢ wᵢᵀ.
         let mut m = [[0.0f64; 3]; 3];
-        for (w, &v) in self.to_xyz.iter().zip(values) {
+        for (w, &v) in self.to_xyz.iter().zip(values.iter()) {
             for r in 0..3 {
                 for c in 0..3 {
                     m[r][c] += v as f64 * w[r] * w[c];
                 }
             }
         }
-        // A well-conditioned system only: relative to its largest entry, M must not be
-        // close to singular (as it is for a spike in one or two bins).
-        let scale = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
-        if scale <= 0.0 {
-            return None;
+        let Some(inv) = super::color::invert3(&m) else {
+            return false;
+        };
+        let k = super::color::mul3(&inv, [0, 1, 2].map(|c| target[c] - got[c]));
+        let factor = |w: &[f64; 3]| 1.0 + w[0] * k[0] + w[1] * k[1] + w[2] * k[2];
+        if !self.to_xyz.iter().all(|w| (0.5..=1.5).contains(&factor(w))) {
+            return false;
         }
-        let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
-        if !(det.abs() / scale.powi(3) >= 1e-9) {
-            return None;
+        for (w, v) in self.to_xyz.iter().zip(values.iter_mut()) {
+            *v = (*v as f64 * factor(w)) as f32;
         }
-        let inv = super::color::invert3(&m)?;
-        let d = [0, 1, 2].map(|c| target[c] - got[c]);
-        let k = super::color::mul3(&inv, d);
-        let mut out = Vec::with_capacity(values.len());
-        for (w, &v) in self.to_xyz.iter().zip(values) {
-            let f = 1.0 + w[0] * k[0] + w[1] * k[1] + w[2] * k[2];
-            if !(0.5..=1.5).contains(&f) || !f.is_finite() {
-                return None;
-            }
-            out.push((v as f64 * f) as f32);
-        }
-        Some(out)
+        true
     }
 
     /// XYZ of channel values.
