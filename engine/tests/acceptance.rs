@@ -253,8 +253,10 @@ fn the_films_noise_estimate_tracks_the_error_against_a_reference() {
     // at 64², its noise estimate (odd against even passes, no reference) against the PSNR
     // against a long render of another seed. The reference has noise of its own (its own
     // estimate); the two combine as independent errors. The estimate measures noise only:
-    // it reads above the real figure by the bias the radius still carries — 3.9 dB after 8
-    // passes here, 2.6 after 32, 0.7 after 96 — and never below it.
+    // it reads above the real figure by the bias the radius still carries — 4.5 dB after 8
+    // passes here, 3.0 after 32, 0.8 after 96 — and never below it. (Final-gather
+    // directions follow a (0,2)-sequence per pixel; the estimate holds because odd and even
+    // passes follow independent copies of it.)
     let scene = scene::load_builtin("cornell-box").unwrap();
     let s = RenderSettings {
         width: 64,

@@ -12,7 +12,7 @@ use crate::materials::{
 };
 use crate::photon::trace::micro_sample;
 use crate::photon::{IrradianceCache, Kernel, PhotonMap};
-use crate::sampling::{Rng, cosine_hemisphere};
+use crate::sampling::{Purpose, Rng, cosine_hemisphere, sobol02};
 use crate::scene::{SpectralScene, SurfaceKind, path_eta};
 use crate::spectral::spd;
 
@@ -85,6 +85,30 @@ impl Scratch {
     }
 }
 
+/// Where a pixel's final-gather directions come from in one pass: a scrambled
+/// (0,2)-sequence of its own ([`sobol02`]), continued from pass to pass, so that the
+/// directions of many passes together cover the hemisphere evenly. Odd and even passes
+/// follow two independently scrambled copies (pass 2k and 2k+1 take points k·rays … of
+/// their copy): the film's noise estimate compares odd against even half-means and needs
+/// them independent, which one sequence shared by both would not be (its halves
+/// interleave and their errors cancel).
+#[derive(Clone, Copy, Debug)]
+pub struct GatherSequence {
+    scramble: [u32; 2],
+    first: u32,
+}
+
+impl GatherSequence {
+    /// `pass` counts from 0.
+    pub fn for_pixel(seed: u64, pixel: u64, pass: u64, rays: u32) -> Self {
+        let mut r = Rng::stream(seed, pass & 1, pixel, Purpose::Gather);
+        Self {
+            scramble: [r.next_u32(), r.next_u32()],
+            first: (pass >> 1).wrapping_mul(rays as u64) as u32,
+        }
+    }
+}
+
 impl Gather<'_> {
     /// Camera ray direction through image position (x, y) in pixels (may be fractional).
     pub fn camera_dir(&self, x: f32, y: f32, width: u32, height: u32) -> Vec3 {
@@ -97,13 +121,14 @@ impl Gather<'_> {
         (px, py): (u32, u32),
         (width, height): (u32, u32),
         rng: &mut Rng,
+        fg: GatherSequence,
         s: &mut Scratch,
         out: &mut [f32],
     ) {
         out.fill(0.0);
         let [jx, jy] = rng.next_2d();
         let dir = self.camera_dir(px as f32 + jx, py as f32 + jy, width, height);
-        self.radiance(self.scene.camera.position, dir, rng, s, out);
+        self.radiance(self.scene.camera.position, dir, rng, fg, s, out);
     }
 
     /// Radiance along a camera ray, added to `out`.
@@ -112,6 +137,7 @@ impl Gather<'_> {
         mut origin: Vec3,
         mut dir: Vec3,
         rng: &mut Rng,
+        fg: GatherSequence,
         s: &mut Scratch,
         out: &mut [f32],
     ) {
@@ -146,7 +172,7 @@ impl Gather<'_> {
                 SurfaceKind::Diffuse { reflectance } => {
                     let mut buf = std::mem::take(&mut s.refl);
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut buf);
-                    self.shade_diffuse(p, nf, reflectance, rng, s);
+                    self.shade_diffuse(p, nf, reflectance, rng, fg, s);
                     s.refl = buf;
                     for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(&s.acc) {
                         *o += t * l;
@@ -234,6 +260,7 @@ impl Gather<'_> {
         nf: Vec3,
         reflectance: &[f32],
         rng: &mut Rng,
+        fg: GatherSequence,
         s: &mut Scratch,
     ) {
         let inv_pi = std::f32::consts::FRAC_1_PI;
@@ -268,8 +295,9 @@ impl Gather<'_> {
         // Indirect light: final gather. Cosine sampling makes each ray's weight ρ, i.e.
         // irradiance π·mean(L), so it joins the other irradiance terms.
         s.fg.fill(0.0);
-        for _ in 0..self.final_gather_rays {
-            let dir = cosine_hemisphere(nf, rng.next_2d());
+        for j in 0..self.final_gather_rays {
+            let u = sobol02(fg.first.wrapping_add(j), fg.scramble);
+            let dir = cosine_hemisphere(nf, u);
             self.final_gather_ray(self.scene.accel.offset(p, nf, dir), dir, rng, &mut s.ray);
             spd::add_scaled(&mut s.fg, &s.ray.out, 1.0);
         }

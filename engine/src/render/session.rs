@@ -14,7 +14,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::film::{Film, Image, SpectralFilm};
-use super::gather::{Gather, Scratch};
+use super::gather::{Gather, GatherSequence, Scratch};
 use super::settings::{RenderSettings, SettingsError, default_photon_budget};
 use crate::photon::{
     IrradianceCache, Kernel, PhotonPass, PhotonSettings, Storage, TraceStop, trace_photons,
@@ -455,6 +455,7 @@ impl RenderSession {
     fn gather_image(&self, gather: &Gather, pass: u64) -> Result<PassImage, RenderError> {
         let (w, h) = (self.settings.width, self.settings.height);
         let (seed, n) = (self.settings.seed, self.scene.bins());
+        let rays = self.settings.final_gather_rays;
         let (cancel, probes, grid) = (&self.cancel, &self.probes, &self.scene.grid);
         let keep_all = self.spectra.is_some();
         let rows: Vec<Option<PassImage>> = (0..h)
@@ -472,7 +473,8 @@ impl RenderSession {
                         .map(|x| {
                             let index = (y as u64) * w as u64 + x as u64;
                             let mut rng = Rng::stream(seed, pass, index, Purpose::Camera);
-                            gather.pixel((x, y), (w, h), &mut rng, scratch, radiance);
+                            let fg = GatherSequence::for_pixel(seed, index, pass - 1, rays);
+                            gather.pixel((x, y), (w, h), &mut rng, fg, scratch, radiance);
                             if let Some(k) = probes.iter().position(|p| (p.x, p.y) == (x, y)) {
                                 spectra.push((k, radiance.clone()));
                             }

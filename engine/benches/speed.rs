@@ -1,0 +1,320 @@
+//! Speed against error (issue #12): seconds of rendering until the image reaches a PSNR
+//! target against a long reference of the same scene (another seed), and how busy the
+//! cores were meanwhile (user + system CPU seconds over wall seconds).
+//!
+//!     cargo bench -p prismap-engine --bench speed
+//!
+//! Two scenes, as the issue measures them:
+//! - the Cornell box at 128², whole image, targets 30 / 35 / 40 dB;
+//! - the prism (first-look camera) at 341×192 (the pixels of 256², at the camera's 16:9),
+//!   over its rainbow region only, targets 30 / 35 dB, against a 100-bin reference.
+//!
+//! Each scene runs the defaults and a few variants of photons per pass and final-gather
+//! rays, so the table also says which setting reaches a target first. PSNR is the paper's
+//! equation 6 on display values at exposure 1; the seconds are render seconds (photon
+//! and gather passes, not the PSNR measurement). Environment:
+//! `PRISMAP_BENCH_REFERENCE_PASSES` (default 256) and `PRISMAP_BENCH_MAX_SECONDS` (per run,
+//! default 40).
+
+use prismap_engine::metrics::psnr;
+use prismap_engine::photon::Storage;
+use prismap_engine::render::{Flow, Image, RenderSession, RenderSettings, Stop};
+use prismap_engine::scene::{self, Scene};
+
+fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// User + system CPU seconds of this process so far.
+fn cpu_seconds() -> f64 {
+    // SAFETY: getrusage writes into the struct it is given and reads nothing else.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) } != 0 {
+        return f64::NAN;
+    }
+    let t = |v: libc::timeval| v.tv_sec as f64 + v.tv_usec as f64 * 1e-6;
+    t(u.ru_utime) + t(u.ru_stime)
+}
+
+/// A pixel rectangle: x0, y0, x1, y1 (exclusive).
+type Rect = (u32, u32, u32, u32);
+
+fn crop(image: &Image, (x0, y0, x1, y1): Rect) -> Image {
+    let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            pixels.push(image.get(x, y));
+        }
+    }
+    Image {
+        width: x1 - x0,
+        height: y1 - y0,
+        pixels,
+    }
+}
+
+/// The rainbow: the bounding box (plus a 4-pixel margin) of the pixels that are both
+/// saturated (max − min over max > 0.6) and bright (luminance above a tenth of the
+/// 99.5th percentile of the image's luminance).
+fn rainbow_region(image: &Image) -> Rect {
+    let lum = |p: &[f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+    let mut sorted: Vec<f32> = image.pixels.iter().map(lum).collect();
+    sorted.sort_by(f32::total_cmp);
+    let bright = 0.1 * sorted[(sorted.len() as f64 * 0.995) as usize];
+    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+    for y in 0..image.height {
+        for x in 0..image.width {
+            let p = image.get(x, y);
+            let (hi, lo) = (p[0].max(p[1]).max(p[2]), p[0].min(p[1]).min(p[2]));
+            if lum(&p) > bright && hi > 0.0 && (hi - lo) / hi > 0.6 {
+                (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
+            }
+        }
+    }
+    assert!(x1 > x0, "no rainbow found in the reference");
+    (
+        x0.saturating_sub(4),
+        y0.saturating_sub(4),
+        (x1 + 4).min(image.width),
+        (y1 + 4).min(image.height),
+    )
+}
+
+struct Outcome {
+    /// Render seconds and passes when each target was first reached.
+    reached: Vec<Option<(f64, u64)>>,
+    passes: u64,
+    seconds: f64,
+    last_db: f64,
+    cpu_per_wall: f64,
+}
+
+fn run_to_targets(
+    scene: &Scene,
+    settings: RenderSettings,
+    reference: &Image,
+    region: Option<Rect>,
+    targets: &[f64],
+    max_seconds: f64,
+) -> Outcome {
+    let mut session = RenderSession::new(scene, settings).expect("valid settings");
+    let mut reached = vec![None; targets.len()];
+    let mut last_db = f64::NAN;
+    let reference = region.map_or_else(|| reference.clone(), |r| crop(reference, r));
+    let (wall, cpu) = (std::time::Instant::now(), cpu_seconds());
+    // The PSNR measurement's own time is taken out of both.
+    let (mut measure_cpu, mut measure_wall) = (0.0, 0.0);
+    session
+        .run(Stop::seconds(max_seconds), None, &mut |s, record| {
+            let t = std::time::Instant::now();
+            let c = cpu_seconds();
+            let image = s.image();
+            let image = region.map_or(image.clone(), |r| crop(&image, r));
+            last_db = psnr(&image, &reference, 1.0).expect("same size");
+            for (slot, &target) in reached.iter_mut().zip(targets) {
+                if slot.is_none() && last_db >= target {
+                    *slot = Some((record.seconds, record.pass));
+                }
+            }
+            measure_cpu += cpu_seconds() - c;
+            measure_wall += t.elapsed().as_secs_f64();
+            if reached.iter().all(Option::is_some) {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            }
+        })
+        .expect("the run renders");
+    let stats = session.stats();
+    Outcome {
+        reached,
+        passes: stats.passes,
+        seconds: stats.photon_seconds + stats.gather_seconds,
+        last_db,
+        cpu_per_wall: (cpu_seconds() - cpu - measure_cpu)
+            / (wall.elapsed().as_secs_f64() - measure_wall),
+    }
+}
+
+fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Image, f64) {
+    let t = std::time::Instant::now();
+    let mut r = RenderSession::new(
+        scene,
+        RenderSettings {
+            seed: 99,
+            ..settings
+        },
+    )
+    .expect("valid settings");
+    r.run(Stop::passes(passes), None, &mut |_, _| Flow::Continue)
+        .expect("the reference renders");
+    (r.image(), t.elapsed().as_secs_f64())
+}
+
+fn print_table(title: &str, targets: &[f64], rows: &[(String, Outcome)]) {
+    println!("\n{title}\n");
+    print!("| setting |");
+    for t in targets {
+        print!(" to {t:.0} dB |");
+    }
+    println!(" ran | user+sys / wall |");
+    print!("|---|");
+    for _ in targets {
+        print!("---|");
+    }
+    println!("---|---|");
+    for (name, o) in rows {
+        print!("| {name} |");
+        for r in &o.reached {
+            match r {
+                Some((s, p)) => print!(" {s:.2} s ({p} passes) |"),
+                None => print!(" not reached |"),
+            }
+        }
+        println!(
+            " {} passes, {:.1} s, {:.2} dB | {:.2} |",
+            o.passes, o.seconds, o.last_db, o.cpu_per_wall
+        );
+    }
+}
+
+fn main() {
+    let reference_passes: u64 = env_or("PRISMAP_BENCH_REFERENCE_PASSES", 256);
+    let max_seconds: f64 = env_or("PRISMAP_BENCH_MAX_SECONDS", 40.0);
+    let only = std::env::var("PRISMAP_BENCH_SCENE").ok();
+    let threads = rayon::current_num_threads();
+    println!(
+        "speed against error; {threads} worker threads; references: {reference_passes} passes, seed 99"
+    );
+
+    if only.as_deref().is_none_or(|s| s == "cornell-box") {
+        let scene = scene::load_builtin("cornell-box").expect("built-in scene");
+        let base = RenderSettings {
+            width: 128,
+            height: 128,
+            ..RenderSettings::default()
+        };
+        let (reference, secs) = reference_image(&scene, base.clone(), reference_passes);
+        let targets = [30.0, 35.0, 40.0];
+        let mut rows = Vec::new();
+        let mut variants: Vec<(String, usize, u32)> = vec![
+            ("defaults: 100 000 photons, 8 rays".into(), 100_000, 8),
+            ("50 000 photons, 8 rays".into(), 50_000, 8),
+            ("50 000 photons, 4 rays".into(), 50_000, 4),
+            ("25 000 photons, 4 rays".into(), 25_000, 4),
+            ("200 000 photons, 16 rays".into(), 200_000, 16),
+        ];
+        // PRISMAP_BENCH_CORNELL="photons:rays,…" replaces the variants (to explore).
+        if let Ok(list) = std::env::var("PRISMAP_BENCH_CORNELL") {
+            variants = list
+                .split(',')
+                .filter_map(|v| {
+                    let (p, r) = v.split_once(':')?;
+                    let (p, r) = (p.trim().parse().ok()?, r.trim().parse().ok()?);
+                    Some((format!("{p} photons, {r} rays"), p, r))
+                })
+                .collect();
+        }
+        for (name, photons, rays) in variants {
+            let settings = RenderSettings {
+                photons_per_pass: photons,
+                final_gather_rays: rays,
+                ..base.clone()
+            };
+            let o = run_to_targets(&scene, settings, &reference, None, &targets, max_seconds);
+            rows.push((name.to_string(), o));
+        }
+        print_table(
+            &format!("Cornell box 128², 20 bins compact, whole image (reference {secs:.0} s)"),
+            &targets,
+            &rows,
+        );
+    }
+
+    if only.as_deref().is_none_or(|s| s == "prism") {
+        let scene = scene::load_builtin("prism").expect("built-in scene");
+        let base = RenderSettings {
+            width: 341,
+            height: 192,
+            ..RenderSettings::default()
+        };
+        let (reference, secs) = reference_image(
+            &scene,
+            RenderSettings {
+                bins: 100,
+                ..base.clone()
+            },
+            reference_passes,
+        );
+        let region = rainbow_region(&reference);
+        let targets = [30.0, 35.0];
+        let mut rows = Vec::new();
+        for (name, bins, storage, photons, rays) in [
+            (
+                "defaults: 20 bins, 100 000 photons, 8 rays",
+                20,
+                Storage::Compact,
+                100_000,
+                8,
+            ),
+            (
+                "100 bins (the viewer's auto), 100 000 photons, 8 rays",
+                100,
+                Storage::Compact,
+                100_000,
+                8,
+            ),
+            (
+                "100 bins, 200 000 photons, 4 rays",
+                100,
+                Storage::Compact,
+                200_000,
+                4,
+            ),
+            (
+                "100 bins packed, 200 000 photons, 4 rays",
+                100,
+                Storage::Packed,
+                200_000,
+                4,
+            ),
+            (
+                "40 bins, 200 000 photons, 4 rays",
+                40,
+                Storage::Compact,
+                200_000,
+                4,
+            ),
+        ] {
+            let settings = RenderSettings {
+                bins,
+                storage,
+                photons_per_pass: photons,
+                final_gather_rays: rays,
+                ..base.clone()
+            };
+            let o = run_to_targets(
+                &scene,
+                settings,
+                &reference,
+                Some(region),
+                &targets,
+                max_seconds,
+            );
+            rows.push((name.to_string(), o));
+        }
+        let (x0, y0, x1, y1) = region;
+        print_table(
+            &format!(
+                "Prism 341×192, rainbow region x {x0}–{x1}, y {y0}–{y1} ({}×{} px), against 100 bins compact (reference {secs:.0} s)",
+                x1 - x0,
+                y1 - y0
+            ),
+            &targets,
+            &rows,
+        );
+    }
+}
