@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes the shipped glTF scenes (cornell-box, cornell-blackbody, prism).
+"""Writes the shipped glTF scenes (cornell-box, cornell-blackbody, cornell-f11, prism).
 
 Run from anywhere: `python3 scenes/make_scenes.py`. The Cornell numbers are exactly those
 of shared/scenes/cornell_box.json (mm, linear sRGB); the prism geometry is solved here so
@@ -131,7 +131,7 @@ def quad(p, a, b):
 
 
 # ---------------------------------------------------------------- Cornell box
-def cornell(path, blackbody):
+def cornell(path, emission=None):
     # A verbatim copy of shared/scenes/cornell_box.json.
     src = json.load(open(os.path.join(HERE, "cornell_box.json")))
     g = Gltf()
@@ -149,9 +149,9 @@ def cornell(path, blackbody):
         "emissiveFactor": [c / strength for c in rad],
         "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": strength}}}
     g.used.add("KHR_materials_emissive_strength")
-    if blackbody:
+    if emission:
         # Same luminance as the RGB light (the loader scales the shape to the colour's Y).
-        lm["extras"] = {"prismap": {"emission": {"blackbody_k": 3000}}}
+        lm["extras"] = {"prismap": {"emission": emission}}
     g.mesh("light", quad(tuple(light["p"]), tuple(light["a"]), tuple(light["b"])), g.material(lm))
     cam = src["camera"]
     fwd = sub(cam["target"], cam["origin"])
@@ -305,6 +305,9 @@ def prism(path):
 
 
 if __name__ == "__main__":
-    cornell(os.path.join(HERE, "cornell-box.gltf"), blackbody=False)
-    cornell(os.path.join(HERE, "cornell-blackbody.gltf"), blackbody=True)
+    cornell(os.path.join(HERE, "cornell-box.gltf"))
+    cornell(os.path.join(HERE, "cornell-blackbody.gltf"), {"blackbody_k": 3000})
+    # A narrow-band fluorescent lamp (issue #14): a smooth base under three sharp peaks,
+    # the light the paper says its compact records cannot represent.
+    cornell(os.path.join(HERE, "cornell-f11.gltf"), {"illuminant": "F11"})
     prism(os.path.join(HERE, "prism.gltf"))

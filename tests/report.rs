@@ -27,8 +27,12 @@ fn tiny_report_has_every_row_column_and_plot() {
         quick: true,
     };
     let runs = report.run().unwrap();
-    // 7 bins × 2 storages + rgb + packed at 2 bin counts, in two modes, plus 4 budget runs.
-    assert_eq!(runs.len(), 2 * (2 * BINS.len() + 1 + PACKED_BINS.len()) + 4);
+    // 7 bins × 2 storages + rgb + packed and spiked at 2 bin counts, in two modes, plus 6
+    // budget runs (full, compact, spiked; progressive and one pass).
+    assert_eq!(
+        runs.len(),
+        2 * (2 * BINS.len() + 1 + 2 * PACKED_BINS.len()) + 6
+    );
     let csv = std::fs::read_to_string(out.join("runs.csv")).unwrap();
     let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
     for col in [
@@ -72,10 +76,24 @@ fn tiny_report_has_every_row_column_and_plot() {
     assert!(md.contains("\n| RGB | "));
     // Issue #14: packed records beside compact, with their 19 bytes a photon.
     assert!(
-        md.contains("Packed records (19 bytes a photon)"),
+        md.contains("Packed (19 bytes a photon) and spiked (37) records"),
         "no packed table"
     );
     assert_eq!(bpp("packed", 20), 19.0);
+    assert_eq!(bpp("spiked", 100), 37.0);
+    // Every record against full at the same seed, with both colour models: a figure in
+    // each cell (no "-": the Smits pair was rendered).
+    let table = md
+        .split("the compression alone")
+        .nth(1)
+        .expect("records-against-full table");
+    let row20 = table.lines().find(|l| l.starts_with("| 20 | ")).unwrap();
+    assert!(!row20.contains("| - |"), "{row20}");
+    // At equal memory, spiked against compact is stated.
+    assert!(
+        md.contains("more compact photons than spiked ones"),
+        "no equal-memory line"
+    );
     for f in ["convergence-cornell-box.png", "memory-cornell-box.png"] {
         let img = image::open(out.join(f)).unwrap();
         assert_eq!((img.width(), img.height()), (900, 560), "{f}");

@@ -166,10 +166,12 @@ fn settings(storage: Storage, bins: usize, fg: u32, side: u32, photons: usize) -
     }
 }
 
-const STORAGES: [(Storage, usize); 4] = [
+const STORAGES: [(Storage, usize); 6] = [
     (Storage::Full, 16),
     (Storage::Compact, 16),
     (Storage::Compact, 4),
+    (Storage::Packed, 16),
+    (Storage::Spiked, 16),
     (Storage::Rgb, 3),
 ];
 

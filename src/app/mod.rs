@@ -709,6 +709,7 @@ impl ViewerApp {
             (Key::Num2, Storage::Compact),
             (Key::Num3, Storage::Rgb),
             (Key::Num4, Storage::Packed),
+            (Key::Num5, Storage::Spiked),
         ] {
             if pressed(k) && self.settings.storage != s {
                 self.settings.storage = s;

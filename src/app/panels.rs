@@ -63,12 +63,8 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
 
                 ui.label("Storage");
                 ui.horizontal(|ui| {
-                    for (s, (key, tip)) in Storage::ALL.into_iter().zip([
-                        ("1", "Full: every stored photon keeps all N bins (N floats)"),
-                        ("2", "Compact (Lai & Christensen): an RGB triplet, or a lossless (−1, bin, amplitude) spike for a single-wavelength photon — 3 floats at any N"),
-                        ("4", "Packed: compact in 32 bits (shared-exponent triplet, or a 12-bit bin and 19-bit amplitude) with a 16-bit normal — 19 bytes a photon at any N"),
-                        ("3", "RGB: the plain RGB renderer, the baseline (no spectra, no dispersion)"),
-                    ]) {
+                    for s in Storage::ALL {
+                        let (key, tip) = storage_tip(s);
                         restart |= ui
                             .radio_value(&mut app.settings.storage, s, s.name())
                             .on_hover_text(format!("{tip}  [{key}]"))
@@ -765,7 +761,30 @@ fn export_csv(
 }
 
 /// The keyboard shortcuts, one per line (the help overlay and its test read this list).
-pub const SHORTCUTS: [(&str, &str); 14] = [
+/// A storage's shortcut key and one-sentence tooltip (exhaustive: a new storage needs both).
+fn storage_tip(s: Storage) -> (&'static str, &'static str) {
+    match s {
+        Storage::Full => ("1", "Full: every stored photon keeps all N bins (N floats)"),
+        Storage::Compact => (
+            "2",
+            "Compact (Lai & Christensen): an RGB triplet, or a lossless (−1, bin, amplitude) spike for a single-wavelength photon — 3 floats at any N",
+        ),
+        Storage::Packed => (
+            "4",
+            "Packed: compact in 32 bits (shared-exponent triplet, or a 12-bit bin and 19-bit amplitude) with a 16-bit normal — 19 bytes a photon at any N",
+        ),
+        Storage::Spiked => (
+            "5",
+            "Spiked: compact plus one exact (bin, amplitude) spike for a peaked spectrum such as a fluorescent lamp's, kept only where it decodes closer — 37 bytes a photon at any N",
+        ),
+        Storage::Rgb => (
+            "3",
+            "RGB: the plain RGB renderer, the baseline (no spectra, no dispersion)",
+        ),
+    }
+}
+
+pub const SHORTCUTS: [(&str, &str); 15] = [
     ("space", "pause / resume refining"),
     ("R", "restart from one pass"),
     ("V", "back to the scene's camera"),
@@ -774,6 +793,7 @@ pub const SHORTCUTS: [(&str, &str); 14] = [
     ("1", "full storage (N floats a photon)"),
     ("2", "compact storage (triplet or spike)"),
     ("4", "packed storage (compact in 19 bytes)"),
+    ("5", "spiked storage (compact plus one exact spike)"),
     ("3", "RGB renderer (the baseline)"),
     ("A", "bins chosen for the scene"),
     ("F", "freeze the image as A / leave compare mode"),

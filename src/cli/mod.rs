@@ -39,7 +39,8 @@ pub enum Command {
 
 #[derive(clap::Args)]
 pub struct RenderArgs {
-    /// A .gltf/.glb file, or a built-in scene name (prism, cornell-box, cornell-blackbody).
+    /// A .gltf/.glb file, or a built-in scene name (prism, cornell-box, cornell-blackbody,
+    /// cornell-f11).
     #[arg(default_value = scene::DEFAULT_SCENE)]
     pub scene: String,
     /// Start from a named preset (preview, interactive, default, reference); the other
@@ -50,7 +51,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub bins: Option<usize>,
     /// Photon storage: full (N floats), compact (RGB triplet or spike), packed (compact in
-    /// 19 bytes a photon) or rgb (RGB renderer).
+    /// 19 bytes a photon), spiked (compact plus one exact spike, 37 bytes: for fluorescent
+    /// lamps) or rgb (RGB renderer).
     #[arg(long, value_parser = parse_storage)]
     pub storage: Option<Storage>,
     /// How scene colours become spectra: jh (Jakob–Hanika 2019, the colour as given) or

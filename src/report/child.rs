@@ -9,6 +9,7 @@ use super::{Report, ReportError};
 use crate::output::Stats;
 use crate::photon::Storage;
 use crate::render::PassRecord;
+use crate::spectral::Upsampling;
 
 pub struct Job<'a> {
     pub name: String,
@@ -19,6 +20,9 @@ pub struct Job<'a> {
     pub limit: Limit,
     pub output: PathBuf,
     pub reference: Option<PathBuf>,
+    /// How scene colours become spectra (the report's runs: Jakob–Hanika, but for the
+    /// Smits pair that shows Algorithm 1 on the paper's own colours).
+    pub spectra: Upsampling,
 }
 
 #[derive(Clone, Copy)]
@@ -47,6 +51,7 @@ impl Report {
             .args(["--size", &format!("{0}x{0}", self.plan.size)])
             .args(["--fg", &self.plan.final_gather_rays.to_string()])
             .args(["--seed", "1"])
+            .args(["--spectra", job.spectra.name()])
             .arg("-o")
             .arg(&job.output)
             .arg("--stats")

@@ -20,6 +20,7 @@ use crate::metrics::{de2000_stats, psnr};
 use crate::output::read_exr;
 use crate::photon::Storage;
 use crate::render::RenderSettings;
+use crate::spectral::Upsampling;
 use child::{Job, Limit};
 
 /// The bin counts of the paper's tables.
@@ -185,6 +186,7 @@ impl Report {
             limit: Limit::Passes(self.plan.reference_passes),
             output: exr.clone(),
             reference: None,
+            spectra: Upsampling::default(),
         };
         self.render(&job)?;
         crate::output::write_json(&meta, &wanted)?;
@@ -272,6 +274,7 @@ impl Report {
         // Issue #14's smaller records beside Algorithm 1, at the bin counts users pick.
         for b in PACKED_BINS {
             configs.push((b, Storage::Packed));
+            configs.push((b, Storage::Spiked));
         }
         let mut runs = Vec::new();
         for (mode, limit) in [
@@ -289,6 +292,7 @@ impl Report {
                     photons: self.plan.photons,
                     limit,
                     reference: Some(ref_path.to_path_buf()),
+                    spectra: Upsampling::default(),
                 };
                 let run = self.measure(&job, mode, reference)?;
                 eprintln!(
@@ -300,6 +304,28 @@ impl Report {
                     run.photon_map_bytes as f64 / 1e6
                 );
                 runs.push(run);
+            }
+        }
+        // Algorithm 1 on the paper's own colours: full and compact with Smits spectra, so
+        // that the report can show the compression alone (compact against full, same
+        // seed) with either upsampling. No error against the reference: its colours are
+        // Jakob–Hanika's.
+        for b in PACKED_BINS {
+            for storage in [Storage::Full, Storage::Compact] {
+                let name = format!("{scene}-smits-{}-{b}", storage.name());
+                let job = Job {
+                    output: self.runs_dir().join(format!("{name}.exr")),
+                    name,
+                    scene,
+                    bins: b,
+                    storage,
+                    photons: self.plan.photons,
+                    limit: Limit::Passes(self.plan.passes),
+                    reference: None,
+                    spectra: Upsampling::Smits,
+                };
+                self.render(&job)?;
+                eprintln!("  smits colours  {:<7} {b:>3} bins", storage.name());
             }
         }
         Ok(runs)
@@ -318,8 +344,10 @@ impl Report {
         for (mode, storage) in [
             ("memory-budget", Storage::Full),
             ("memory-budget", Storage::Compact),
+            ("memory-budget", Storage::Spiked),
             ("memory-budget-1-pass", Storage::Full),
             ("memory-budget-1-pass", Storage::Compact),
+            ("memory-budget-1-pass", Storage::Spiked),
         ] {
             let Some(probe) = sweep.iter().find(|r| {
                 r.mode == "equal-photons" && r.storage == storage.name() && r.bins == 100
@@ -344,6 +372,7 @@ impl Report {
                     Limit::Passes(1)
                 },
                 reference: Some(ref_path.to_path_buf()),
+                spectra: Upsampling::default(),
             };
             let run = self.measure(&job, mode, reference)?;
             eprintln!(
@@ -404,6 +433,7 @@ pub fn default_scenes() -> Vec<String> {
     vec![
         "cornell-box".into(),
         "cornell-blackbody".into(),
+        "cornell-f11".into(),
         "prism".into(),
     ]
 }

@@ -222,11 +222,11 @@ impl LightSet {
         accel: &Accel,
         p: Vec3,
         nf: Vec3,
-        rng: &mut Rng,
+        [u_light, u, v]: [f32; 3],
         out: &mut [f32],
     ) {
         out.fill(0.0);
-        if let Some(s) = self.sample_direct(tris, accel, p, nf, rng) {
+        if let Some(s) = self.sample_direct_at(tris, accel, p, nf, u_light, [u, v]) {
             out.copy_from_slice(&self.lights[s.light].spectrum);
             spd::scale(out, s.cos * s.weight);
         }
@@ -244,12 +244,25 @@ impl LightSet {
         nf: Vec3,
         rng: &mut Rng,
     ) -> Option<DirectSample> {
+        self.sample_direct_at(tris, accel, p, nf, rng.next_f32(), rng.next_2d())
+    }
+
+    /// [`Self::sample_direct`] with its random numbers given: `u_light` picks the light,
+    /// `uv` the point on it (a pixel's sequence across passes, see `gather`).
+    pub fn sample_direct_at(
+        &self,
+        tris: &[TriData],
+        accel: &Accel,
+        p: Vec3,
+        nf: Vec3,
+        u_light: f32,
+        uv: [f32; 2],
+    ) -> Option<DirectSample> {
         if self.lights.is_empty() {
             return None;
         }
-        let li = sample_cdf(&self.direct_cdf, rng.next_f32());
+        let li = sample_cdf(&self.direct_cdf, u_light);
         let (light, pmf) = (&self.lights[li], self.direct_pmf[li]);
-        let uv = rng.next_2d();
         if !(pmf > 0.0) {
             return None;
         }

@@ -116,11 +116,12 @@ impl IrradianceCache {
         // Smits triplets are kept as triplets (decoded per lookup at O(N)); colour
         // triplets would need a Jakob–Hanika decode per lookup, so their cache keeps N
         // floats per point (decoded once per point).
-        let record = if grid.smits_triplets() && map.record() != Record::Full {
-            Record::Compact
-        } else {
-            Record::Full
-        };
+        let record =
+            if grid.smits_triplets() && matches!(map.record(), Record::Compact | Record::Packed) {
+                Record::Compact
+            } else {
+                Record::Full
+            };
         let stride = record.flux_stride(n);
         // Points are about √every photon spacings apart where photons are typical; the
         // typical k-nearest radius spans √k spacings.

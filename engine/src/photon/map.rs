@@ -14,6 +14,61 @@ use crate::spectral::{BinGrid, spd};
 thread_local! {
     /// A decoded colour triplet (N bins), reused by every estimate on this thread.
     static DECODED: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// A spiked record's residual and its decoding (2 × N bins), reused per photon.
+    static RESIDUAL: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Squared distance between `flux` and the triplet `t` decoded, plus `amp` in `bin`.
+fn decoded_error(
+    grid: &BinGrid,
+    flux: &[f32],
+    t: [f32; 3],
+    spike: (usize, f32),
+    buf: &mut [f32],
+) -> f32 {
+    grid.decode_triplet_into(t, buf);
+    buf[spike.0] += spike.1;
+    flux.iter()
+        .zip(buf.iter())
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum()
+}
+
+/// A spiked record (see [`Record::Spiked`]) of a flux with two or more non-zero bins: the
+/// bin standing highest above its neighbours (its excess over the larger of them) is kept
+/// exactly as `(bin, excess)` and the rest, that bin lowered to its neighbour, becomes the
+/// triplet — when that decodes closer to `flux` (squared error over the bins) than the
+/// flux's own triplet does; else the plain triplet with a zero spike.
+pub fn encode_spiked(grid: &BinGrid, flux: &[f32]) -> [f32; 5] {
+    let n = flux.len();
+    let neighbour = |b: usize| {
+        let l = if b > 0 { flux[b - 1] } else { 0.0 };
+        let r = if b + 1 < n { flux[b + 1] } else { 0.0 };
+        l.max(r)
+    };
+    let (bin, excess) = (0..n)
+        .map(|b| (b, flux[b] - neighbour(b)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((0, 0.0));
+    let plain = grid.encode_triplet(flux);
+    if !(excess > 0.0) {
+        return [plain[0], plain[1], plain[2], 0.0, 0.0];
+    }
+    RESIDUAL.with_borrow_mut(|buf| {
+        buf.clear();
+        buf.extend_from_slice(flux);
+        buf[bin] -= excess;
+        buf.resize(2 * n, 0.0);
+        let (residual, decoded) = buf.split_at_mut(n);
+        let t = grid.encode_triplet(residual);
+        let with_spike = decoded_error(grid, flux, t, (bin, excess), decoded);
+        let without = decoded_error(grid, flux, plain, (0, 0.0), decoded);
+        if with_spike < without {
+            [t[0], t[1], t[2], bin as f32, excess]
+        } else {
+            [plain[0], plain[1], plain[2], 0.0, 0.0]
+        }
+    })
 }
 
 /// Photons as the tracer produces them, not yet searchable.
@@ -74,6 +129,14 @@ impl PhotonBatch {
         }
         self.headers.push(PhotonHeader::new(pos, normal));
         match (self.record, grid.smits()) {
+            (Record::Spiked, Some(_)) => match spd::single_nonzero(flux) {
+                Some(bin) => {
+                    self.spikes += 1;
+                    self.flux.extend_from_slice(&encode_spike(bin, flux[bin]));
+                    self.flux.extend_from_slice(&[0.0, 0.0]);
+                }
+                None => self.flux.extend_from_slice(&encode_spiked(grid, flux)),
+            },
             (Record::Compact | Record::Packed, Some(_)) => {
                 let rec = match spd::single_nonzero(flux) {
                     Some(bin) => {
@@ -244,13 +307,27 @@ impl PhotonMap {
         }
     }
 
-    /// Stored photon `i`'s compact record (compact and packed storage).
+    /// Stored photon `i`'s compact record (compact, packed and spiked storage).
     #[inline]
     fn compact_record(&self, i: usize) -> [f32; 3] {
         if self.record == Record::Packed {
             unpack_record(self.packed[i])
         } else {
-            [self.flux[3 * i], self.flux[3 * i + 1], self.flux[3 * i + 2]]
+            let s = self.stride * i;
+            [self.flux[s], self.flux[s + 1], self.flux[s + 2]]
+        }
+    }
+
+    /// Adds stored photon `i`'s extra spike to `out` (spiked storage; else nothing).
+    #[inline]
+    fn add_extra_spike(&self, i: usize, out: &mut [f32]) {
+        if self.record == Record::Spiked {
+            let (bin, a) = (self.flux[5 * i + 3], self.flux[5 * i + 4]);
+            if a != 0.0
+                && let Some(v) = out.get_mut(bin as usize)
+            {
+                *v += a;
+            }
         }
     }
 
@@ -371,9 +448,12 @@ impl PhotonMap {
     /// the paper prescribes, colour triplets are summed and decoded once — O(1) a photon.
     fn sum_flux(&self, grid: &BinGrid, ids: impl Iterator<Item = usize>, out: &mut [f32]) {
         match (self.record, grid.smits()) {
-            (Record::Compact | Record::Packed, Some(smits)) if grid.smits_triplets() => {
+            (Record::Compact | Record::Packed | Record::Spiked, Some(smits))
+                if grid.smits_triplets() =>
+            {
                 let mut sums = BranchSums::default();
                 for i in ids {
+                    self.add_extra_spike(i, out);
                     let rec = self.compact_record(i);
                     match decode_spike(rec) {
                         Some((bin, a)) => {
@@ -386,11 +466,12 @@ impl PhotonMap {
                 }
                 sums.expand_into(smits, out);
             }
-            (Record::Compact | Record::Packed, Some(_)) => {
+            (Record::Compact | Record::Packed | Record::Spiked, Some(_)) => {
                 // Colour triplets: summed, then decoded once.
                 let mut sum = [0.0f32; 3];
                 let mut any = false;
                 for i in ids {
+                    self.add_extra_spike(i, out);
                     let rec = self.compact_record(i);
                     match decode_spike(rec) {
                         Some((bin, a)) => {
@@ -442,7 +523,7 @@ impl PhotonMap {
         out.fill(0.0);
         match self.record {
             Record::Full => out.copy_from_slice(&self.flux[i * self.stride..(i + 1) * self.stride]),
-            Record::Compact | Record::Packed => {
+            Record::Compact | Record::Packed | Record::Spiked => {
                 let rec = self.compact_record(i);
                 match decode_spike(rec) {
                     Some((bin, a)) => out[bin] = a,
@@ -452,6 +533,7 @@ impl PhotonMap {
                         }
                     }
                 }
+                self.add_extra_spike(i, out);
             }
         }
     }

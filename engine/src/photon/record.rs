@@ -9,12 +9,18 @@
 //! | `compact` | position 3×f32, normal u32     | 3 × f32: RGB triplet or spike     | u8      | 29           |
 //! | `rgb`     | position 3×f32, normal u32     | 3 × f32: linear sRGB              | u8      | 29           |
 //! | `packed`  | position 3×f32, normal u16     | u32: packed triplet or spike      | u8      | 19           |
+//! | `spiked`  | position 3×f32, normal u32     | 3 × f32 compact + bin, amplitude  | u8      | 37           |
 //!
 //! `packed` is `compact` in 32 bits (issue #14): a triplet as three 8-bit mantissas under
 //! one 7-bit shared exponent (2⁻⁶⁴…2⁶³, within 0.2 % of the largest channel), a spike as
 //! its 12-bit bin and a 7 + 12-bit float amplitude (within 1.3·10⁻⁴), the top bit telling
 //! them apart; the normal in 2×8-bit octahedral code (within 1.5°, against the 37° a
 //! density estimate allows).
+//!
+//! `spiked` (issue #14) is `compact` plus one exact spike: a photon whose spectrum has a
+//! narrow peak (a fluorescent lamp's lines) keeps the strongest bin's excess over its
+//! neighbours as `(bin, amplitude)` and the rest as the triplet — only where that decodes
+//! closer to the photon's flux than the triplet alone; else the spike's amplitude is 0.
 //!
 //! The normal is the landing surface's normal on the side the photon arrived from,
 //! octahedral-encoded in 2×16 bits (error < 0.01°). Lambertian surfaces need no incoming
@@ -39,6 +45,8 @@ pub enum Storage {
     /// Compact records packed into 32 bits (19 bytes a photon with its position, normal
     /// and kd byte): quantised triplet and spike amplitude.
     Packed,
+    /// Compact records plus one exact spike beside the triplet (see the module notes).
+    Spiked,
     /// The RGB renderer baseline: transport and storage in linear sRGB.
     Rgb,
 }
@@ -55,6 +63,8 @@ pub enum Record {
     Compact,
     /// A compact record packed into one u32 (see [`pack_record`]), the normal in 16 bits.
     Packed,
+    /// Five f32: a compact record, then a spike's bin (as f32) and amplitude (0: none).
+    Spiked,
 }
 
 /// Bytes of a packed photon: position 12, normal 2, record 4, kd axis 1.
@@ -67,6 +77,7 @@ impl Record {
         match self {
             Record::Full => channels,
             Record::Compact => 3,
+            Record::Spiked => 5,
             Record::Packed => 0,
         }
     }
@@ -87,19 +98,23 @@ impl Storage {
             Storage::Compact => "compact",
             Storage::Rgb => "rgb",
             Storage::Packed => "packed",
+            Storage::Spiked => "spiked",
         }
     }
 
-    pub const ALL: [Storage; 4] = [
+    pub const ALL: [Storage; 5] = [
         Storage::Full,
         Storage::Compact,
         Storage::Packed,
+        Storage::Spiked,
         Storage::Rgb,
     ];
 
     pub fn transport(self) -> Transport {
         match self {
-            Storage::Full | Storage::Compact | Storage::Packed => Transport::Spectral,
+            Storage::Full | Storage::Compact | Storage::Packed | Storage::Spiked => {
+                Transport::Spectral
+            }
             Storage::Rgb => Transport::Rgb,
         }
     }
@@ -109,6 +124,7 @@ impl Storage {
             Storage::Full | Storage::Rgb => Record::Full,
             Storage::Compact => Record::Compact,
             Storage::Packed => Record::Packed,
+            Storage::Spiked => Record::Spiked,
         }
     }
 
@@ -134,8 +150,9 @@ impl std::str::FromStr for Storage {
             "compact" => Ok(Storage::Compact),
             "rgb" => Ok(Storage::Rgb),
             "packed" => Ok(Storage::Packed),
+            "spiked" => Ok(Storage::Spiked),
             _ => Err(format!(
-                "unknown storage '{s}' (use full, compact, packed or rgb)"
+                "unknown storage '{s}' (use full, compact, packed, spiked or rgb)"
             )),
         }
     }

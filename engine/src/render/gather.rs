@@ -12,7 +12,7 @@ use crate::materials::{
 };
 use crate::photon::trace::micro_sample;
 use crate::photon::{IrradianceCache, Kernel, PhotonMap};
-use crate::sampling::{Purpose, Rng, cosine_hemisphere, sobol02};
+use crate::sampling::{Purpose, Rng, cosine_hemisphere, r2, sobol02};
 use crate::scene::{SpectralScene, SurfaceKind, path_eta};
 use crate::spectral::spd;
 
@@ -96,6 +96,9 @@ impl Scratch {
 pub struct GatherSequence {
     scramble: [u32; 2],
     first: u32,
+    /// The direct-light sample's point on the light: an R2 sequence, one point a pass.
+    light_offset: [f32; 2],
+    light_index: u32,
 }
 
 impl GatherSequence {
@@ -105,6 +108,8 @@ impl GatherSequence {
         Self {
             scramble: [r.next_u32(), r.next_u32()],
             first: (pass >> 1).wrapping_mul(rays as u64) as u32,
+            light_offset: r.next_2d(),
+            light_index: (pass >> 1) as u32,
         }
     }
 }
@@ -282,9 +287,9 @@ impl Gather<'_> {
         }
         // Direct light by light sampling.
         let scene = self.scene;
-        scene
-            .lights
-            .direct(&scene.tris, &scene.accel, p, nf, rng, &mut s.tmp);
+        let [u, v] = r2(fg.light_index, fg.light_offset);
+        let u_light = [rng.next_f32(), u, v];
+        (scene.lights).direct(&scene.tris, &scene.accel, p, nf, u_light, &mut s.tmp);
         spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
         // Caustics from the caustic map (irradiance, converted to radiance below).
         if let Some(cm) = self.caustic {

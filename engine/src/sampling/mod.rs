@@ -91,6 +91,20 @@ pub fn sobol02(i: u32, scramble: [u32; 2]) -> [f32; 2] {
     [f(x), f(y)]
 }
 
+/// Point `i` of Roberts' R2 sequence (the 2-D Kronecker sequence of the plastic number)
+/// rotated by `offset` (Cranley–Patterson): evenly spread for any run of consecutive
+/// points, and built unlike [`sobol02`], so a pixel can use both side by side without the
+/// two sharing structure.
+#[inline]
+pub fn r2(i: u32, offset: [f32; 2]) -> [f32; 2] {
+    const A: [f64; 2] = [0.754_877_666_246_692_8, 0.569_840_290_998_053_3];
+    let f = |a: f64, o: f32| {
+        let v = ((o as f64 + i as f64 * a).fract()) as f32;
+        if v < 1.0 { v } else { 0.0 }
+    };
+    [f(A[0], offset[0]), f(A[1], offset[1])]
+}
+
 /// An orthonormal basis around unit `n` (Duff et al. 2017), returned as (t, b).
 #[inline]
 pub fn basis(n: Vec3) -> (Vec3, Vec3) {

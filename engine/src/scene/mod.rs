@@ -194,6 +194,10 @@ pub const BUILTIN: &[(&str, &[u8])] = &[
         "cornell-blackbody",
         include_bytes!("../../../scenes/cornell-blackbody.gltf"),
     ),
+    (
+        "cornell-f11",
+        include_bytes!("../../../scenes/cornell-f11.gltf"),
+    ),
 ];
 
 /// The scene the viewer and `prismap render` open when none is given.
@@ -204,7 +208,7 @@ pub fn builtin(name: &str) -> Option<&'static [u8]> {
     BUILTIN.iter().find(|(n, _)| *n == name).map(|(_, b)| *b)
 }
 
-/// Loads a built-in scene by name ("prism", "cornell-box", "cornell-blackbody").
+/// Loads a built-in scene by name ("prism", "cornell-box", "cornell-blackbody", "cornell-f11").
 pub fn load_builtin(name: &str) -> Result<Scene, SceneError> {
     let (stem, bytes) =
         BUILTIN
