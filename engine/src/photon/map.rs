@@ -38,7 +38,8 @@ fn decoded_error(
 /// bin standing highest above its neighbours (its excess over the larger of them) is kept
 /// exactly as `(bin, excess)` and the rest, that bin lowered to its neighbour, becomes the
 /// triplet — when that decodes closer to `flux` (squared error over the bins) than the
-/// flux's own triplet does; else the plain triplet with a zero spike.
+/// flux's own triplet does; else the plain triplet with a zero spike. Excesses under 2 %
+/// of the flux are not tried.
 pub fn encode_spiked(grid: &BinGrid, flux: &[f32]) -> [f32; 5] {
     let n = flux.len();
     let neighbour = |b: usize| {
@@ -51,7 +52,9 @@ pub fn encode_spiked(grid: &BinGrid, flux: &[f32]) -> [f32; 5] {
         .max_by(|a, b| a.1.total_cmp(&b.1))
         .unwrap_or((0, 0.0));
     let plain = grid.encode_triplet(flux);
-    if !(excess > 0.0) {
+    // A bin less than 2 % of the flux above its neighbours is no line worth a spike (and
+    // smooth spectra skip the two trial decodings).
+    if !(excess > 0.02 * spd::sum(flux)) {
         return [plain[0], plain[1], plain[2], 0.0, 0.0];
     }
     RESIDUAL.with_borrow_mut(|buf| {
