@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use egui_kittest::Harness;
-use egui_kittest::kittest::Queryable;
+use egui_kittest::kittest::{NodeT, Queryable};
 use prismap::app::{SceneSource, ViewerApp, format_bytes};
 use prismap::photon::Storage;
 use prismap::render::{RenderSession, RenderSettings};
@@ -544,4 +544,110 @@ fn every_panel_is_reachable_at_800x500_and_whole_at_1920x1080() {
             );
         }
     }
+}
+
+/// Whether a node is a control a user operates (and so should explain itself on hover).
+fn is_control(role: egui::accesskit::Role) -> bool {
+    use egui::accesskit::Role;
+    matches!(
+        role,
+        Role::Button
+            | Role::CheckBox
+            | Role::RadioButton
+            | Role::Slider
+            | Role::SpinButton
+            | Role::ComboBox
+            | Role::TextInput
+            | Role::MultilineTextInput
+            | Role::Switch
+    )
+}
+
+/// Every text on screen (labels and control names) with how often it shows, to tell what
+/// a hover added (a tooltip may repeat a text already there: a field's own description).
+fn texts(h: &Harness<'static, ViewerApp>) -> std::collections::HashMap<String, usize> {
+    let mut counts = std::collections::HashMap::new();
+    for n in h.query_all(egui_kittest::kittest::By::new().predicate(|_| true)) {
+        let a = n.accesskit_node();
+        for t in [a.label(), a.value()].into_iter().flatten() {
+            *counts.entry(t).or_insert(0) += 1;
+        }
+    }
+    counts
+}
+
+#[test]
+fn every_control_explains_itself_on_hover() {
+    // Issue #13: a tooltip on every control — found from the UI's own accessibility tree,
+    // not from a list: each control, hovered, adds a text to the screen that was not
+    // there before. The render is paused so that nothing else changes between looks.
+    let mut h = harness_sized("prism", 1920.0, 1080.0);
+    h.ctx
+        .global_style_mut(|s| s.interaction.tooltip_delay = 0.0);
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    h.key_press(egui::Key::Space);
+    h.run_steps(4);
+    let controls = |h: &Harness<'static, ViewerApp>| -> Vec<(String, egui::Rect)> {
+        h.query_all(egui_kittest::kittest::By::new().predicate(|n| is_control(n.role())))
+            .map(|n| {
+                let a = n.accesskit_node();
+                let name = a.label().or_else(|| a.value()).unwrap_or_default();
+                (format!("{:?} {name:?}", a.role()), n.rect())
+            })
+            .collect()
+    };
+    let silent_ones = |h: &mut Harness<'static, ViewerApp>, list: &[(String, egui::Rect)]| {
+        let mut silent = Vec::new();
+        for (name, rect) in list {
+            h.remove_cursor();
+            h.run_steps(3);
+            let before = texts(h);
+            h.hover_at(rect.center());
+            h.run_steps(3);
+            let after = texts(h);
+            if !after
+                .iter()
+                .any(|(t, n)| before.get(t).is_none_or(|b| n > b))
+            {
+                silent.push(name.clone());
+            }
+        }
+        silent
+    };
+    let first = controls(&h);
+    assert!(first.len() >= 25, "only {} controls found", first.len());
+    let mut silent = silent_ones(&mut h, &first);
+    // A probe (its spectrum panel) and compare mode (F) bring their own controls.
+    h.remove_cursor();
+    h.state_mut().set_probe((10, 10));
+    h.state_mut().pin_probe();
+    h.key_press(egui::Key::F);
+    h.run_steps(4);
+    let seen: Vec<&String> = first.iter().map(|c| &c.0).collect();
+    let more: Vec<(String, egui::Rect)> = controls(&h)
+        .into_iter()
+        .filter(|c| !seen.contains(&&c.0))
+        .collect();
+    assert!(
+        !more.is_empty(),
+        "compare mode showed no controls of its own"
+    );
+    silent.extend(silent_ones(&mut h, &more));
+    // The difference view's gain.
+    h.state_mut().compare_view = prismap::app::compare::CompareView::Difference;
+    h.run_steps(4);
+    let seen: Vec<String> = first.iter().chain(&more).map(|c| c.0.clone()).collect();
+    let gain: Vec<(String, egui::Rect)> = controls(&h)
+        .into_iter()
+        .filter(|c| !seen.contains(&c.0))
+        .collect();
+    assert!(gain.iter().any(|c| c.0.contains("gain")), "{gain:?}");
+    silent.extend(silent_ones(&mut h, &gain));
+    let more = [more, gain].concat();
+    assert!(
+        silent.is_empty(),
+        "{} of {} controls show no tooltip: {silent:#?}",
+        silent.len(),
+        first.len() + more.len()
+    );
 }

@@ -59,12 +59,12 @@ fn crop(image: &Image, (x0, y0, x1, y1): Rect) -> Image {
 
 /// The rainbow: the bounding box (plus a 4-pixel margin) of the pixels that are, with
 /// all 8 neighbours, saturated (max − min over max > 0.6) and bright (luminance above a
-/// tenth of the image's 99.5th percentile) — a patch, not the glints in the glass.
+/// 0.03 of the image's 99.5th percentile: violet is dim) — a patch, not the glints in the glass.
 fn rainbow_region(image: &Image) -> Rect {
     let lum = |p: &[f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
     let mut sorted: Vec<f32> = image.pixels.iter().map(lum).collect();
     sorted.sort_by(f32::total_cmp);
-    let bright = 0.1 * sorted[(sorted.len() as f64 * 0.995) as usize];
+    let bright = 0.03 * sorted[(sorted.len() as f64 * 0.995) as usize];
     let coloured = |x: u32, y: u32| {
         let p = image.get(x, y);
         let (hi, lo) = (p[0].max(p[1]).max(p[2]), p[0].min(p[1]).min(p[2]));
@@ -206,11 +206,11 @@ fn main() {
         let targets = [30.0, 35.0, 40.0];
         let mut rows = Vec::new();
         let mut variants: Vec<(String, usize, u32)> = vec![
-            ("defaults: 100 000 photons, 8 rays".into(), 100_000, 8),
-            ("50 000 photons, 8 rays".into(), 50_000, 8),
+            ("100 000 photons, 8 rays".into(), 100_000, 8),
             ("50 000 photons, 4 rays".into(), 50_000, 4),
             ("25 000 photons, 4 rays".into(), 25_000, 4),
-            ("200 000 photons, 16 rays".into(), 200_000, 16),
+            ("10 000 photons, 4 rays".into(), 10_000, 4),
+            ("10 000 photons, 2 rays".into(), 10_000, 2),
         ];
         // PRISMAP_BENCH_CORNELL="photons:rays,…" replaces the variants (to explore).
         if let Ok(list) = std::env::var("PRISMAP_BENCH_CORNELL") {
@@ -270,38 +270,45 @@ fn main() {
         let mut rows = Vec::new();
         let mut variants: Vec<(String, usize, Storage, usize, u32)> = vec![
             (
-                "defaults: 20 bins, 100 000 photons, 8 rays".into(),
+                "20 bins, 100 000 photons, 8 rays".into(),
                 20,
                 Storage::Compact,
                 100_000,
                 8,
             ),
             (
-                "100 bins (the viewer's auto), 100 000 photons, 8 rays".into(),
+                "100 bins, 100 000 photons, 8 rays".into(),
                 100,
                 Storage::Compact,
                 100_000,
                 8,
             ),
             (
-                "100 bins, 200 000 photons, 4 rays".into(),
+                "100 bins, 25 000 photons, 4 rays".into(),
                 100,
                 Storage::Compact,
-                200_000,
+                25_000,
                 4,
             ),
             (
-                "100 bins packed, 200 000 photons, 4 rays".into(),
+                "100 bins packed, 25 000 photons, 4 rays".into(),
                 100,
                 Storage::Packed,
-                200_000,
+                25_000,
                 4,
             ),
             (
-                "40 bins, 200 000 photons, 4 rays".into(),
+                "40 bins, 25 000 photons, 4 rays".into(),
                 40,
                 Storage::Compact,
-                200_000,
+                25_000,
+                4,
+            ),
+            (
+                "20 bins, 25 000 photons, 4 rays".into(),
+                20,
+                Storage::Compact,
+                25_000,
                 4,
             ),
         ];

@@ -35,13 +35,16 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                                 open = Some(s);
                             }
                         }
-                    });
+                    })
+                    .response
+                    .on_hover_text("The built-in scenes, then the other .gltf/.glb files found in scenes/");
                 ui.horizontal(|ui| {
                     let field = ui.add(
                         egui::TextEdit::singleline(&mut app.path_input)
                             .hint_text("path/to/scene.gltf")
                             .desired_width(130.0),
-                    );
+                    )
+                    .on_hover_text("Type the path of a .gltf or .glb file and press Enter to open it");
                     let entered =
                         field.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
                     let clicked = ui
@@ -51,7 +54,11 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     if (entered || clicked) && !app.path_input.trim().is_empty() {
                         open = Some(SceneSource::File(app.path_input.trim().into()));
                     }
-                    if ui.button("Browse…").clicked() {
+                    if ui
+                        .button("Browse…")
+                        .on_hover_text("Choose a .gltf or .glb file to open")
+                        .clicked()
+                    {
                         app.act(Action::OpenDialog);
                     }
                 });
@@ -98,11 +105,16 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     }
                     ui.horizontal_wrapped(|ui| {
                         for p in crate::spectral::PAPER_BINS {
+                            let width = (app.settings.lambda_max - app.settings.lambda_min) / p as f64;
                             if ui
                                 .selectable_label(
                                     !app.auto_bins && app.settings.bins == p,
                                     p.to_string(),
                                 )
+                                .on_hover_text(format!(
+                                    "{p} bins of {width:.1} nm from {:.0} to {:.0} nm, one of the paper's bin counts",
+                                    app.settings.lambda_min, app.settings.lambda_max
+                                ))
                                 .clicked()
                             {
                                 app.settings.bins = p;
@@ -150,15 +162,19 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                                     restart = true;
                                 }
                             }
-                        });
+                        })
+                        .response
+                        .on_hover_text("Image size in pixels; the width follows the scene camera's aspect ratio");
                 }
                 ui.separator();
                 ui.horizontal(|ui| {
-                    let r = ui.add(
-                        egui::Slider::new(&mut app.exposure, 1e-5..=1e3)
-                            .logarithmic(true)
-                            .text("Exposure"),
-                    );
+                    let r = ui
+                        .add(
+                            egui::Slider::new(&mut app.exposure, 1e-5..=1e3)
+                                .logarithmic(true)
+                                .text("Exposure"),
+                        )
+                        .on_hover_text("Brightness of the display (a linear factor on radiance); PNG saves use it, EXR saves stay linear");
                     if r.changed() {
                         app.auto_exposure = false;
                     }
@@ -228,6 +244,7 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     if ui
                         .add_enabled(ready, egui::Button::new("Save spectral EXR"))
                         .on_hover_text("Every bin as a channel S0.<wavelength>nm beside R, G, B (Fichet et al. 2021's OpenEXR layout for spectral images)")
+                        .on_disabled_hover_text("Turn on Keep spectra and let a pass finish: the spectral EXR needs every pixel's spectrum")
                         .clicked()
                     {
                         app.act(Action::Save("spectral.exr"));
@@ -236,7 +253,7 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 ui.small(format!("into {}/", app.save_dir.display()));
                 ui.separator();
                 compare_controls(app, ui);
-                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/4/3 full/compact/packed/rgb · A auto bins · F freeze A · D denoised view · F1 or ? all keys");
+                ui.small("keys: space pause · R restart · V view · S/E save · 1/2/4/5/3 full/compact/packed/spiked/rgb · A auto bins · F freeze A · D denoised view · F1 or ? all keys");
                 if restart {
                     app.act(Action::Restart);
                 }
@@ -293,7 +310,8 @@ fn compare_controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
     });
     match app.compare_view {
         CompareView::Split => {
-            ui.add(egui::Slider::new(&mut app.compare_split, 0.0..=1.0).text("split"));
+            ui.add(egui::Slider::new(&mut app.compare_split, 0.0..=1.0).text("split"))
+                .on_hover_text("Where the image changes from A (left) to the live B (right)");
         }
         CompareView::Difference => {
             changed |= ui
@@ -302,6 +320,7 @@ fn compare_controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         .logarithmic(true)
                         .text("× gain"),
                 )
+                .on_hover_text("How much the difference |A − B| is magnified to be seen")
                 .changed();
         }
     }
@@ -479,7 +498,6 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         .allow_drag(false)
                         .allow_zoom(false)
                         .allow_scroll(false)
-                        .legend(egui_plot::Legend::default())
                         .x_axis_label("seconds since start")
                         .y_axis_label("MB")
                         .show(ui, |p| {
@@ -489,9 +507,24 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                                 .collect();
                             let rss: Vec<[f64; 2]> =
                                 hist.iter().map(|h| [h.seconds, h.resident / 1e6]).collect();
-                            p.line(Line::new("photon maps", PlotPoints::from(maps)));
-                            p.line(Line::new("resident", PlotPoints::from(rss)));
+                            p.line(
+                                Line::new("photon maps", PlotPoints::from(maps))
+                                    .color(MAPS_COLOUR),
+                            );
+                            p.line(
+                                Line::new("resident", PlotPoints::from(rss)).color(RESIDENT_COLOUR),
+                            );
                         });
+                    // A caption instead of the plot's legend (whose entries are toggles
+                    // with nothing to explain them).
+                    ui.horizontal(|ui| {
+                        ui.label(RichText::new("— photon maps").color(MAPS_COLOUR).small());
+                        ui.label(
+                            RichText::new("— process resident memory")
+                                .color(RESIDENT_COLOUR)
+                                .small(),
+                        );
+                    });
                 }
                 if !s.skipped.is_empty() {
                     ui.separator();
@@ -761,6 +794,10 @@ fn export_csv(
 }
 
 /// The keyboard shortcuts, one per line (the help overlay and its test read this list).
+/// The memory plot's line colours (named in its caption).
+const MAPS_COLOUR: egui::Color32 = egui::Color32::from_rgb(90, 160, 255);
+const RESIDENT_COLOUR: egui::Color32 = egui::Color32::from_rgb(255, 150, 60);
+
 /// A storage's shortcut key and one-sentence tooltip (exhaustive: a new storage needs both).
 fn storage_tip(s: Storage) -> (&'static str, &'static str) {
     match s {
