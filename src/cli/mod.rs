@@ -62,7 +62,7 @@ pub struct RenderArgs {
     /// Photons emitted per pass.
     #[arg(long)]
     pub photons: Option<usize>,
-    /// Number of passes (default 16 unless --seconds is given).
+    /// Number of passes (default 32 unless --seconds is given).
     #[arg(long)]
     pub passes: Option<u64>,
     /// Render passes until this many seconds have passed (at least one pass; with

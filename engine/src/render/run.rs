@@ -20,7 +20,7 @@ pub struct Stop {
 
 impl Stop {
     /// Passes rendered when the user gives neither a pass count nor a time.
-    pub const DEFAULT_PASSES: u64 = 16;
+    pub const DEFAULT_PASSES: u64 = 32;
 
     pub fn passes(n: u64) -> Self {
         Self {
@@ -41,7 +41,7 @@ impl Stop {
         Self::default()
     }
 
-    /// The CLI's rule: the given passes, or the given seconds, or 16 passes.
+    /// The CLI's rule: the given passes, or the given seconds, or 32 passes.
     pub fn from_flags(passes: Option<u64>, seconds: Option<f64>) -> Result<Self, SettingsError> {
         let stop = match (passes, seconds) {
             (None, None) => Self::passes(Self::DEFAULT_PASSES),
@@ -233,6 +233,6 @@ mod tests {
                 .contains("--passes")
         );
         assert!(Stop::from_flags(None, Some(f64::NAN)).is_err());
-        assert_eq!(Stop::from_flags(None, None).unwrap(), Stop::passes(16));
+        assert_eq!(Stop::from_flags(None, None).unwrap(), Stop::passes(32));
     }
 }
