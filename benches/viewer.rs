@@ -85,8 +85,15 @@ fn main() {
     let (secs, passes) = full_passes
         .iter()
         .fold((0.0, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
+    let used = &h.state().settings;
     println!(
-        "viewer benchmark: prism 512×512, 50 000 photons/pass, 8 final-gather rays, 20 bins, {} worker threads",
+        "viewer benchmark: prism {}×{}, {} photons/pass, {} final-gather rays, {} bins {}, {} worker threads",
+        used.width,
+        used.height,
+        used.photons_per_pass,
+        used.final_gather_rays,
+        used.bins,
+        used.storage.name(),
         std::thread::available_parallelism()
             .map(|n| n.get().saturating_sub(1).max(1))
             .unwrap_or(1)
