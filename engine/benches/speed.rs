@@ -14,8 +14,11 @@
 //! equation 6 on display values (exposure 1 for the box; the reference's automatic
 //! exposure for the prism, whose rainbow clips at 1); the seconds are render seconds (photon
 //! and gather passes, not the PSNR measurement). Environment:
-//! `PRISMAP_BENCH_REFERENCE_PASSES` (default 256) and `PRISMAP_BENCH_MAX_SECONDS` (per run,
-//! default 40).
+//! `PRISMAP_BENCH_REFERENCE_PASSES` (default 256; the references use 100 000 photons and 8
+//! final-gather rays a pass), `PRISMAP_BENCH_MAX_SECONDS` (per run, default 40),
+//! `PRISMAP_BENCH_SCENE` (`cornell-box` or `prism`: one scene only) and
+//! `PRISMAP_BENCH_CORNELL` = `photons:rays,…` / `PRISMAP_BENCH_PRISM` = `bins:photons:rays,…`
+//! (other variants).
 
 use prismap_engine::metrics::psnr;
 use prismap_engine::photon::Storage;
@@ -144,12 +147,17 @@ fn run_to_targets(
     }
 }
 
+/// A long render of another seed, with settings of its own (100 000 photons and 8
+/// final-gather rays a pass, whatever the defaults are), so that every run and every
+/// version of the engine is measured against the same kind of reference.
 fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Image, f64) {
     let t = std::time::Instant::now();
     let mut r = RenderSession::new(
         scene,
         RenderSettings {
             seed: 99,
+            photons_per_pass: 100_000,
+            final_gather_rays: 8,
             ..settings
         },
     )
