@@ -163,13 +163,20 @@ impl Report {
         }
     }
 
+    /// Render seconds of run `name`, from its stats file (None if it has none).
+    fn stats_seconds(&self, name: &str) -> Option<f64> {
+        let text = std::fs::read_to_string(self.runs_dir().join(format!("{name}.json"))).ok()?;
+        let stats: crate::output::Stats = serde_json::from_str(&text).ok()?;
+        Some(stats.render_seconds())
+    }
+
     /// Each record format against full records at the same seed and photons, with
     /// Jakob–Hanika colours and (compact) with the paper's Smits colours.
     fn records_versus_full(&self, r: &SceneRuns) -> String {
         let mut md = String::from(
             "Each record format against full records, same seed, photons and colours (the compression alone; higher is closer):\n\n\
-             | bins | compact, Jakob–Hanika colours | compact, Smits colours (the paper) | packed | spiked | compact maps | packed maps | spiked maps |\n\
-             |---|---|---|---|---|---|---|---|\n",
+             | bins | compact, Jakob–Hanika colours | compact, Smits colours (the paper) | packed | spiked | compact maps | packed maps | spiked maps | compact s: Jakob–Hanika / Smits |\n\
+             |---|---|---|---|---|---|---|---|---|\n",
         );
         let mut any = false;
         for b in PACKED_BINS {
@@ -183,9 +190,12 @@ impl Report {
                 continue;
             }
             any = true;
+            let seconds = |x: Option<f64>| x.map_or("-".to_string(), |s| format!("{s:.2}"));
+            let jh_s = r.get("equal-photons", "compact", b).map(|x| x.seconds);
+            let smits_s = self.stats_seconds(&format!("{}-smits-compact-{b}", r.scene));
             let _ = writeln!(
                 md,
-                "| {b} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {b} | {} | {} | {} | {} | {} | {} | {} | {} / {} |",
                 self.versus_full(r.scene, "equal-photons", "compact", b),
                 self.versus_full(r.scene, "smits", "compact", b),
                 self.versus_full(r.scene, "equal-photons", "packed", b),
@@ -193,6 +203,8 @@ impl Report {
                 maps("compact"),
                 maps("packed"),
                 maps("spiked"),
+                seconds(jh_s),
+                seconds(smits_s),
             );
         }
         if any {
