@@ -32,6 +32,20 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
+/// The `N` colon-separated whole numbers of one variant in environment variable `var`;
+/// a malformed one stops the bench with a message naming the variable and the entry.
+fn numbers<const N: usize>(var: &str, entry: &str) -> [usize; N] {
+    let parsed: Vec<usize> = entry
+        .split(':')
+        .map(|x| x.trim().parse().ok())
+        .collect::<Option<_>>()
+        .unwrap_or_default();
+    parsed.try_into().unwrap_or_else(|_| {
+        eprintln!("{var}: '{entry}' is not {N} whole numbers separated by ':'");
+        std::process::exit(2)
+    })
+}
+
 /// User + system CPU seconds of this process so far.
 fn cpu_seconds() -> f64 {
     // SAFETY: getrusage writes into the struct it is given and reads nothing else.
@@ -99,29 +113,40 @@ struct Outcome {
     cpu_per_wall: f64,
 }
 
-fn run_to_targets(
-    scene: &Scene,
-    settings: RenderSettings,
-    reference: &Image,
+/// What every run of one scene is measured against.
+struct Measure<'a> {
+    scene: &'a Scene,
+    reference: &'a Image,
     region: Option<Rect>,
     exposure: f32,
-    targets: &[f64],
+    targets: &'a [f64],
     max_seconds: f64,
-) -> Outcome {
+}
+
+/// Each named variant rendered until its targets (or the time limit).
+fn run_all(m: &Measure, variants: Vec<(String, RenderSettings)>) -> Vec<(String, Outcome)> {
+    variants
+        .into_iter()
+        .map(|(name, settings)| (name, run_to_targets(m, settings)))
+        .collect()
+}
+
+fn run_to_targets(m: &Measure, settings: RenderSettings) -> Outcome {
+    let (scene, region, targets) = (m.scene, m.region, m.targets);
     let mut session = RenderSession::new(scene, settings).expect("valid settings");
     let mut reached = vec![None; targets.len()];
     let mut last_db = f64::NAN;
-    let reference = region.map_or_else(|| reference.clone(), |r| crop(reference, r));
+    let reference = region.map_or_else(|| m.reference.clone(), |r| crop(m.reference, r));
     let (wall, cpu) = (std::time::Instant::now(), cpu_seconds());
     // The PSNR measurement's own time is taken out of both.
     let (mut measure_cpu, mut measure_wall) = (0.0, 0.0);
     session
-        .run(Stop::seconds(max_seconds), None, &mut |s, record| {
+        .run(Stop::seconds(m.max_seconds), None, &mut |s, record| {
             let t = std::time::Instant::now();
             let c = cpu_seconds();
             let image = s.image();
             let image = region.map_or(image.clone(), |r| crop(&image, r));
-            last_db = psnr(&image, &reference, exposure).expect("same size");
+            last_db = psnr(&image, &reference, m.exposure).expect("same size");
             for (slot, &target) in reached.iter_mut().zip(targets) {
                 if slot.is_none() && last_db >= target {
                     *slot = Some((record.seconds, record.pass));
@@ -212,7 +237,6 @@ fn main() {
         };
         let (reference, secs) = reference_image(&scene, base.clone(), reference_passes);
         let targets = [30.0, 35.0, 40.0];
-        let mut rows = Vec::new();
         let mut variants: Vec<(String, usize, u32)> = vec![
             ("100 000 photons, 8 rays".into(), 100_000, 8),
             ("50 000 photons, 4 rays".into(), 50_000, 4),
@@ -224,30 +248,32 @@ fn main() {
         if let Ok(list) = std::env::var("PRISMAP_BENCH_CORNELL") {
             variants = list
                 .split(',')
-                .filter_map(|v| {
-                    let (p, r) = v.split_once(':')?;
-                    let (p, r) = (p.trim().parse().ok()?, r.trim().parse().ok()?);
-                    Some((format!("{p} photons, {r} rays"), p, r))
+                .map(|v| {
+                    let [p, r] = numbers::<2>("PRISMAP_BENCH_CORNELL", v);
+                    (format!("{p} photons, {r} rays"), p, r as u32)
                 })
                 .collect();
         }
-        for (name, photons, rays) in variants {
-            let settings = RenderSettings {
-                photons_per_pass: photons,
-                final_gather_rays: rays,
-                ..base.clone()
-            };
-            let o = run_to_targets(
-                &scene,
-                settings,
-                &reference,
-                None,
-                1.0,
-                &targets,
-                max_seconds,
-            );
-            rows.push((name, o));
-        }
+        let measure = Measure {
+            scene: &scene,
+            reference: &reference,
+            region: None,
+            exposure: 1.0,
+            targets: &targets,
+            max_seconds,
+        };
+        let variants = variants
+            .into_iter()
+            .map(|(name, photons, rays)| {
+                let settings = RenderSettings {
+                    photons_per_pass: photons,
+                    final_gather_rays: rays,
+                    ..base.clone()
+                };
+                (name, settings)
+            })
+            .collect();
+        let rows = run_all(&measure, variants);
         print_table(
             &format!("Cornell box 128², 20 bins compact, whole image (reference {secs:.0} s)"),
             &targets,
@@ -275,7 +301,6 @@ fn main() {
         // reference's automatic exposure instead.
         let exposure = prismap_engine::output::auto_exposure(&reference);
         let targets = [30.0, 35.0];
-        let mut rows = Vec::new();
         let mut variants: Vec<(String, usize, Storage, usize, u32)> = vec![
             (
                 "20 bins, 100 000 photons, 8 rays".into(),
@@ -324,38 +349,35 @@ fn main() {
         if let Ok(list) = std::env::var("PRISMAP_BENCH_PRISM") {
             variants = list
                 .split(',')
-                .filter_map(|v| {
-                    let mut it = v.split(':').map(|x| x.trim().parse::<usize>().ok());
-                    let (b, p, r) = (it.next()??, it.next()??, it.next()??);
-                    Some((
-                        format!("{b} bins, {p} photons, {r} rays"),
-                        b,
-                        Storage::Compact,
-                        p,
-                        r as u32,
-                    ))
+                .map(|v| {
+                    let [b, p, r] = numbers::<3>("PRISMAP_BENCH_PRISM", v);
+                    let name = format!("{b} bins, {p} photons, {r} rays");
+                    (name, b, Storage::Compact, p, r as u32)
                 })
                 .collect();
         }
-        for (name, bins, storage, photons, rays) in variants {
-            let settings = RenderSettings {
-                bins,
-                storage,
-                photons_per_pass: photons,
-                final_gather_rays: rays,
-                ..base.clone()
-            };
-            let o = run_to_targets(
-                &scene,
-                settings,
-                &reference,
-                Some(region),
-                exposure,
-                &targets,
-                max_seconds,
-            );
-            rows.push((name, o));
-        }
+        let measure = Measure {
+            scene: &scene,
+            reference: &reference,
+            region: Some(region),
+            exposure,
+            targets: &targets,
+            max_seconds,
+        };
+        let variants = variants
+            .into_iter()
+            .map(|(name, bins, storage, photons, rays)| {
+                let settings = RenderSettings {
+                    bins,
+                    storage,
+                    photons_per_pass: photons,
+                    final_gather_rays: rays,
+                    ..base.clone()
+                };
+                (name, settings)
+            })
+            .collect();
+        let rows = run_all(&measure, variants);
         let (x0, y0, x1, y1) = region;
         print_table(
             &format!(

@@ -771,3 +771,47 @@ fn a_metal_mirror_reflects_schlicks_fresnel_of_its_base_colour() {
         }
     }
 }
+
+#[test]
+fn a_square_lamp_lights_the_floor_below_by_its_form_factor() {
+    // Direct light from an area emitter, sampled along each pixel's sequence across passes
+    // (issue #12): a square lamp of radiance Le and side 2a, a height h above a diffuse
+    // floor of albedo ρ, seen by a narrow camera at the floor point under its centre. The
+    // lamp reflects nothing and the floor is flat, so all the light is direct: radiance
+    // ρ·Le·F with F the differential form factor, 4 × the corner formula
+    // (1/2π)[X/√(1+X²)·atan(Y/√(1+X²)) + Y/√(1+Y²)·atan(X/√(1+Y²))], X = Y = a/h.
+    let (rho, le, a, h) = (0.5f64, 1.0f64, 0.5f32, 1.0f32);
+    let mut b = Builder::new();
+    b.add(floor_4x4(), diffuse(rho), None);
+    let p = |x: f32, z: f32| Vec3::new(x, h, z);
+    // Facing −y (down).
+    b.add(
+        vec![
+            [p(-a, -a), p(a, -a), p(a, a)],
+            [p(-a, -a), p(a, a), p(-a, a)],
+        ],
+        diffuse(0.0),
+        Some(Spectrum::Constant(le)),
+    );
+    let scene = b.scene(
+        "lamp-floor",
+        Camera::look_at(Vec3::new(0.0, 0.5, 0.0), Vec3::ZERO, Vec3::Z, 0.02),
+    );
+    let x = (a / h) as f64;
+    let corner = {
+        let s = (1.0 + x * x).sqrt();
+        (2.0 * x / s * (x / s).atan()) / (2.0 * std::f64::consts::PI)
+    };
+    let exact = rho * le * 4.0 * corner;
+    for fg in [1, 4] {
+        for passes in [4, 32] {
+            let mean = mean_luminance(&scene, settings(Storage::Compact, 8, fg, 8, 2_000), passes);
+            println!("fg {fg}, {passes} passes: floor under the lamp {mean:.5} (exact {exact:.5})");
+            let tolerance = if passes == 4 { 0.03 } else { 0.005 };
+            assert!(
+                (mean / exact - 1.0).abs() < tolerance,
+                "fg {fg}, {passes} passes: {mean} against {exact}"
+            );
+        }
+    }
+}

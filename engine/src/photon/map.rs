@@ -321,16 +321,29 @@ impl PhotonMap {
         }
     }
 
-    /// Adds stored photon `i`'s extra spike to `out` (spiked storage; else nothing).
+    /// Adds stored photon `i`'s spikes to `out` — a spike record's, and a spiked record's
+    /// extra one — and returns its triplet, if its record holds one (compact, packed and
+    /// spiked storage).
     #[inline]
-    fn add_extra_spike(&self, i: usize, out: &mut [f32]) {
-        if self.record == Record::Spiked {
-            let (bin, a) = (self.flux[5 * i + 3], self.flux[5 * i + 4]);
-            if a != 0.0
-                && let Some(v) = out.get_mut(bin as usize)
-            {
+    fn add_spikes(&self, i: usize, out: &mut [f32]) -> Option<[f32; 3]> {
+        let mut add = |bin: usize, a: f32| {
+            if let Some(v) = out.get_mut(bin) {
                 *v += a;
             }
+        };
+        if self.record == Record::Spiked {
+            let (bin, a) = (self.flux[5 * i + 3], self.flux[5 * i + 4]);
+            if a != 0.0 {
+                add(bin as usize, a);
+            }
+        }
+        let rec = self.compact_record(i);
+        match decode_spike(rec) {
+            Some((bin, a)) => {
+                add(bin, a);
+                None
+            }
+            None => Some(rec),
         }
     }
 
@@ -456,15 +469,8 @@ impl PhotonMap {
             {
                 let mut sums = BranchSums::default();
                 for i in ids {
-                    self.add_extra_spike(i, out);
-                    let rec = self.compact_record(i);
-                    match decode_spike(rec) {
-                        Some((bin, a)) => {
-                            if let Some(v) = out.get_mut(bin) {
-                                *v += a;
-                            }
-                        }
-                        None => sums.add(rec, 1.0),
+                    if let Some(rec) = self.add_spikes(i, out) {
+                        sums.add(rec, 1.0);
                     }
                 }
                 sums.expand_into(smits, out);
@@ -474,19 +480,10 @@ impl PhotonMap {
                 let mut sum = [0.0f32; 3];
                 let mut any = false;
                 for i in ids {
-                    self.add_extra_spike(i, out);
-                    let rec = self.compact_record(i);
-                    match decode_spike(rec) {
-                        Some((bin, a)) => {
-                            if let Some(v) = out.get_mut(bin) {
-                                *v += a;
-                            }
-                        }
-                        None => {
-                            any = true;
-                            for c in 0..3 {
-                                sum[c] += rec[c];
-                            }
+                    if let Some(rec) = self.add_spikes(i, out) {
+                        any = true;
+                        for c in 0..3 {
+                            sum[c] += rec[c];
                         }
                     }
                 }
@@ -527,16 +524,12 @@ impl PhotonMap {
         match self.record {
             Record::Full => out.copy_from_slice(&self.flux[i * self.stride..(i + 1) * self.stride]),
             Record::Compact | Record::Packed | Record::Spiked => {
+                // The triplet decodes into `out` (overwriting it), the spikes add after.
                 let rec = self.compact_record(i);
-                match decode_spike(rec) {
-                    Some((bin, a)) => out[bin] = a,
-                    None => {
-                        if grid.smits().is_some() {
-                            grid.decode_triplet_into(rec, out)
-                        }
-                    }
+                if decode_spike(rec).is_none() && grid.smits().is_some() {
+                    grid.decode_triplet_into(rec, out);
                 }
-                self.add_extra_spike(i, out);
+                self.add_spikes(i, out);
             }
         }
     }

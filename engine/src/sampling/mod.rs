@@ -13,7 +13,7 @@ use std::f32::consts::PI;
 pub enum Purpose {
     Photon = 1,
     Camera = 2,
-    /// A pixel's final-gather sequence scramble (one per pixel, the same every pass).
+    /// A pixel's sequence scrambles (one pair per pixel: odd passes, even passes).
     Gather = 3,
 }
 
