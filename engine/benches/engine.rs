@@ -29,6 +29,7 @@ fn bench_tracing(bencher: Bencher, scene: &SpectralScene) {
         max_bounces: 1024,
         dispersion_split: 4,
         caustic_map: true,
+        caustic_factor: 1,
         max_map_bytes: usize::MAX,
     };
     let cancel = AtomicBool::new(false);
@@ -77,6 +78,7 @@ fn gather_queries(bencher: Bencher, storage: Storage) {
         max_bounces: 1024,
         dispersion_split: 4,
         caustic_map: true,
+        caustic_factor: 1,
         max_map_bytes: usize::MAX,
     };
     let map = trace_photons(&scene, &settings, 1, 1, &AtomicBool::new(false))

@@ -16,9 +16,11 @@
 //! and gather passes, not the PSNR measurement). Environment:
 //! `PRISMAP_BENCH_REFERENCE_PASSES` (default 256; the references use 100 000 photons and 8
 //! final-gather rays a pass), `PRISMAP_BENCH_MAX_SECONDS` (per run, default 40),
-//! `PRISMAP_BENCH_SCENE` (`cornell-box` or `prism`: one scene only) and
-//! `PRISMAP_BENCH_CORNELL` = `photons:rays,…` / `PRISMAP_BENCH_PRISM` = `bins:photons:rays,…`
-//! (other variants).
+//! `PRISMAP_BENCH_SCENE` (`cornell-box` or `prism`: one scene only), `PRISMAP_BENCH_CACHE`
+//! (a folder to keep the references in between runs) and
+//! `PRISMAP_BENCH_CORNELL` = `photons:rays,…` / `PRISMAP_BENCH_PRISM` =
+//! `bins:photons:rays:caustic_factor:caustic_k,…` (other variants). The references take the default
+//! caustic factor.
 
 use prismap_engine::metrics::psnr;
 use prismap_engine::photon::Storage;
@@ -177,6 +179,25 @@ fn run_to_targets(m: &Measure, settings: RenderSettings) -> Outcome {
 /// version of the engine is measured against the same kind of reference.
 fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Image, f64) {
     let t = std::time::Instant::now();
+    // PRISMAP_BENCH_CACHE=dir keeps each reference as an EXR named by its settings (to
+    // explore variants without re-rendering it).
+    let cached = std::env::var("PRISMAP_BENCH_CACHE").ok().map(|dir| {
+        let key = format!(
+            "{}-{}x{}-{}bins-{}passes-caustic{}.exr",
+            scene.name,
+            settings.width,
+            settings.height,
+            settings.bins,
+            passes,
+            settings.caustic_factor
+        );
+        std::path::Path::new(&dir).join(key)
+    });
+    if let Some(path) = &cached
+        && let Ok(image) = prismap_engine::output::read_exr(path)
+    {
+        return (image, 0.0);
+    }
     let mut r = RenderSession::new(
         scene,
         RenderSettings {
@@ -189,6 +210,10 @@ fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Ima
     .expect("valid settings");
     r.run(Stop::passes(passes), None, &mut |_, _| Flow::Continue)
         .expect("the reference renders");
+    if let Some(path) = &cached {
+        prismap_engine::output::write_exr(path, &r.image())
+            .expect("the reference cache is writable");
+    }
     (r.image(), t.elapsed().as_secs_f64())
 }
 
@@ -301,58 +326,27 @@ fn main() {
         // reference's automatic exposure instead.
         let exposure = prismap_engine::output::auto_exposure(&reference);
         let targets = [30.0, 35.0];
-        let mut variants: Vec<(String, usize, Storage, usize, u32)> = vec![
-            (
-                "20 bins, 100 000 photons, 8 rays".into(),
-                20,
-                Storage::Compact,
-                100_000,
-                8,
-            ),
-            (
-                "100 bins, 100 000 photons, 8 rays".into(),
-                100,
-                Storage::Compact,
-                100_000,
-                8,
-            ),
-            (
-                "100 bins, 25 000 photons, 4 rays".into(),
-                100,
-                Storage::Compact,
-                25_000,
-                4,
-            ),
-            (
-                "100 bins packed, 25 000 photons, 4 rays".into(),
-                100,
-                Storage::Packed,
-                25_000,
-                4,
-            ),
-            (
-                "40 bins, 25 000 photons, 4 rays".into(),
-                40,
-                Storage::Compact,
-                25_000,
-                4,
-            ),
-            (
-                "20 bins, 25 000 photons, 4 rays".into(),
-                20,
-                Storage::Compact,
-                25_000,
-                4,
-            ),
+        // (bins, storage, photons, rays, caustic factor)
+        let defaults = RenderSettings::default();
+        let c = defaults.caustic_factor;
+        let k = defaults.caustic_k;
+        let mut variants: Vec<(usize, Storage, usize, u32, usize, usize)> = vec![
+            (20, Storage::Compact, 100_000, 8, 1, k),
+            (100, Storage::Compact, 100_000, 8, 1, k),
+            (100, Storage::Compact, 25_000, 4, 1, k),
+            (100, Storage::Compact, 25_000, 4, c, k),
+            (100, Storage::Packed, 25_000, 4, c, k),
+            (40, Storage::Compact, 25_000, 4, c, k),
+            (20, Storage::Compact, 25_000, 4, c, k),
         ];
-        // PRISMAP_BENCH_PRISM="bins:photons:rays,…" replaces the variants (compact).
+        // PRISMAP_BENCH_PRISM="bins:photons:rays:caustic_factor:caustic_k,…" replaces the
+        // variants (compact).
         if let Ok(list) = std::env::var("PRISMAP_BENCH_PRISM") {
             variants = list
                 .split(',')
                 .map(|v| {
-                    let [b, p, r] = numbers::<3>("PRISMAP_BENCH_PRISM", v);
-                    let name = format!("{b} bins, {p} photons, {r} rays");
-                    (name, b, Storage::Compact, p, r as u32)
+                    let [b, p, r, f, k] = numbers::<5>("PRISMAP_BENCH_PRISM", v);
+                    (b, Storage::Compact, p, r as u32, f, k)
                 })
                 .collect();
         }
@@ -366,12 +360,18 @@ fn main() {
         };
         let variants = variants
             .into_iter()
-            .map(|(name, bins, storage, photons, rays)| {
+            .map(|(bins, storage, photons, rays, caustic_factor, caustic_k)| {
+                let packed = if storage == Storage::Packed { " packed" } else { "" };
+                let name = format!(
+                    "{bins} bins{packed}, {photons} photons, {rays} rays, caustic ×{caustic_factor}, k {caustic_k}"
+                );
                 let settings = RenderSettings {
                     bins,
                     storage,
                     photons_per_pass: photons,
                     final_gather_rays: rays,
+                    caustic_factor,
+                    caustic_k,
                     ..base.clone()
                 };
                 (name, settings)

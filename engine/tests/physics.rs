@@ -496,6 +496,7 @@ fn a_smooth_shaded_glass_ball_focuses_like_a_finely_tessellated_one() {
             max_bounces: 1024,
             dispersion_split: 4,
             caustic_map: true,
+            caustic_factor: 1,
             max_map_bytes: usize::MAX,
         };
         let pass =
@@ -688,6 +689,7 @@ fn a_bin_spreads_over_its_own_width_so_the_rainbow_is_continuous() {
         max_bounces: 1024,
         dispersion_split: 16,
         caustic_map: true,
+        caustic_factor: 1,
         max_map_bytes: usize::MAX,
     };
     let cancel = std::sync::atomic::AtomicBool::new(false);
@@ -813,5 +815,74 @@ fn a_square_lamp_lights_the_floor_below_by_its_form_factor() {
                 "fg {fg}, {passes} passes: {mean} against {exact}"
             );
         }
+    }
+}
+
+#[test]
+fn extra_caustic_photons_sample_the_same_caustic_and_leave_the_global_map_alone() {
+    // With a caustic factor of 4 the first `photons` are traced exactly as before (the
+    // same global map, record for record), and the caustic map holds about four times the
+    // records carrying the same total flux per bin: the global photons' caustic records
+    // at a quarter of their flux, the extra photons at the flux of one in 4·photons.
+    use prismap_engine::photon::{PhotonMap, PhotonSettings, trace_photons};
+    use prismap_engine::scene::{SpectralScene, load_builtin};
+    use prismap_engine::spectral::BinGrid;
+    let bins = 4;
+    let grid = BinGrid::with_bins(bins).unwrap();
+    let scene = SpectralScene::new(&load_builtin("prism").unwrap(), grid.clone());
+    let trace = |photons, caustic_factor| {
+        let settings = PhotonSettings {
+            photons,
+            record: Storage::Full.record(),
+            max_bounces: 1024,
+            dispersion_split: 4,
+            caustic_map: true,
+            caustic_factor,
+            max_map_bytes: usize::MAX,
+        };
+        trace_photons(
+            &scene,
+            &settings,
+            5,
+            1,
+            &std::sync::atomic::AtomicBool::new(false),
+        )
+        .unwrap()
+    };
+    let total = |map: &PhotonMap| {
+        let mut sum = vec![0.0f64; bins];
+        let mut flux = vec![0.0; bins];
+        for i in 0..map.len() {
+            map.flux_of(&grid, i, &mut flux);
+            for (s, f) in sum.iter_mut().zip(&flux) {
+                *s += *f as f64;
+            }
+        }
+        sum
+    };
+    let plain = trace(40_000, 1);
+    let boosted = trace(40_000, 4);
+    let dense = trace(160_000, 1);
+    assert_eq!(boosted.emitted, 40_000);
+    assert_eq!(boosted.caustic_emitted, 120_000);
+    assert_eq!(plain.caustic_emitted, 0);
+    assert_eq!(boosted.global.len(), plain.global.len());
+    assert_eq!(total(&boosted.global), total(&plain.global));
+    let (c1, c4, cd) = (
+        plain.caustic.unwrap(),
+        boosted.caustic.unwrap(),
+        dense.caustic.unwrap(),
+    );
+    let ratio = c4.len() as f64 / c1.len() as f64;
+    assert!((3.6..4.4).contains(&ratio), "caustic records ×{ratio:.2}");
+    let (t4, td) = (total(&c4), total(&cd));
+    for b in 0..bins {
+        let rel = t4[b] / td[b] - 1.0;
+        assert!(
+            rel.abs() < 0.02,
+            "bin {b}: caustic flux {:.5} with factor 4 against {:.5} from 4× the photons ({rel:+.4})",
+            t4[b],
+            td[b]
+        );
     }
 }

@@ -83,6 +83,17 @@ pub struct RenderArgs {
     /// Most single-wavelength photons one photon splits into at dispersive glass.
     #[arg(long)]
     pub split: Option<usize>,
+    /// Caustic-map photons per pass, as a multiple of --photons (1: only the global
+    /// photons' caustic paths; the extra ones end at their first diffuse hit).
+    #[arg(long)]
+    pub caustic_factor: Option<usize>,
+    /// Neighbours a global-map density estimate adapts its radius to.
+    #[arg(long)]
+    pub global_k: Option<usize>,
+    /// Neighbours a caustic-map estimate adapts its radius to, per unit of
+    /// --caustic-factor (it gathers k × factor photons: the same radius at any factor).
+    #[arg(long)]
+    pub caustic_k: Option<usize>,
     /// Safety cap on any path's bounces (Russian roulette ends paths long before).
     #[arg(long)]
     pub max_bounces: Option<u32>,
@@ -138,6 +149,9 @@ impl RenderArgs {
             seed: self.seed.unwrap_or(base.seed),
             final_gather_rays: self.fg.unwrap_or(base.final_gather_rays),
             dispersion_split: self.split.unwrap_or(base.dispersion_split),
+            caustic_factor: self.caustic_factor.unwrap_or(base.caustic_factor),
+            global_k: self.global_k.unwrap_or(base.global_k),
+            caustic_k: self.caustic_k.unwrap_or(base.caustic_k),
             max_bounces: self.max_bounces.unwrap_or(base.max_bounces),
             alpha: self.alpha.unwrap_or(base.alpha),
             global_radius: self.global_radius.or(base.global_radius),

@@ -35,6 +35,9 @@ pub struct Stats {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PhotonStats {
     pub emitted: u64,
+    /// Photons emitted for the caustic map only (`--caustic-factor`).
+    #[serde(default)]
+    pub caustic_emitted: u64,
     pub stored_global: u64,
     pub stored_caustic: u64,
     pub spike_records: u64,
@@ -85,6 +88,7 @@ impl Stats {
             final_gather_rays: s.final_gather_rays,
             photons: PhotonStats {
                 emitted: st.photons_emitted,
+                caustic_emitted: st.caustic_photons_emitted,
                 stored_global: st.stored_global,
                 stored_caustic: st.stored_caustic,
                 spike_records: st.spike_records,

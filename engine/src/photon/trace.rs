@@ -38,6 +38,12 @@ pub struct PhotonSettings {
     pub dispersion_split: usize,
     /// Build a caustic map (only meaningful when the scene has specular surfaces).
     pub caustic_map: bool,
+    /// Photons emitted for the caustic map, as a multiple of `photons` (at least 1). The
+    /// first `photons` are the global map's, whose L S+ D paths the caustic map keeps too;
+    /// the rest follow only specular bounces and end at their first diffuse hit, so where
+    /// they miss every mirror and glass they cost one ray. Every caustic photon carries
+    /// the flux of one in `photons · caustic_factor`.
+    pub caustic_factor: usize,
     /// Most bytes the pass's photon maps may hold (records + kd-tree); the pass stops
     /// with [`TraceStop::OverBudget`] as soon as its stored photons pass it.
     pub max_map_bytes: usize,
@@ -48,6 +54,8 @@ pub struct PhotonPass {
     pub global: PhotonMap,
     pub caustic: Option<PhotonMap>,
     pub emitted: u64,
+    /// Photons emitted for the caustic map only (see [`PhotonSettings::caustic_factor`]).
+    pub caustic_emitted: u64,
     pub splits: u64,
 }
 
@@ -72,6 +80,18 @@ struct Path {
     lambda_u: Option<f32>,
 }
 
+/// What a photon is emitted for, and how its flux is stored in the caustic map.
+#[derive(Clone, Copy)]
+struct Role {
+    /// Traced to the end of its path, stored at every diffuse hit (else: a caustic-only
+    /// photon, ended at its first diffuse hit).
+    global: bool,
+    /// Photons its emitted flux is shared among (`photons`, or all caustic photons).
+    emitted_among: usize,
+    /// Factor from its flux to its caustic record's flux.
+    caustic_scale: f32,
+}
+
 /// Traces `settings.photons` photons for pass `pass`.
 pub fn trace_photons(
     scene: &SpectralScene,
@@ -80,8 +100,24 @@ pub fn trace_photons(
     pass: u64,
     cancel: &AtomicBool,
 ) -> Result<PhotonPass, TraceStop> {
-    let chunks = settings.photons.div_ceil(CHUNK);
     let caustic = settings.caustic_map && scene.has_specular;
+    let factor = if caustic {
+        settings.caustic_factor.max(1)
+    } else {
+        1
+    };
+    let caustic_photons = settings.photons.saturating_mul(factor);
+    let global_role = Role {
+        global: true,
+        emitted_among: settings.photons,
+        caustic_scale: 1.0 / factor as f32,
+    };
+    let caustic_role = Role {
+        global: false,
+        emitted_among: caustic_photons,
+        caustic_scale: 1.0,
+    };
+    let chunks = caustic_photons.div_ceil(CHUNK);
     let used = AtomicUsize::new(0);
     let over = AtomicBool::new(false);
     let results: Vec<Option<(PhotonBatch, PhotonBatch, u64)>> = (0..chunks)
@@ -94,12 +130,17 @@ pub fn trace_photons(
             let mut caustics = PhotonBatch::new(settings.record, &scene.grid);
             let mut splits = 0;
             let start = c * CHUNK;
-            let end = (start + CHUNK).min(settings.photons);
+            let end = (start + CHUNK).min(caustic_photons);
             let mut scratch = TraceScratch::default();
             for i in start..end {
                 let mut rng = Rng::stream(seed, pass, i as u64, Purpose::Photon);
                 let maps = (&mut global, &mut caustics);
-                splits += trace_one(scene, settings, caustic, &mut rng, maps, &mut scratch);
+                let role = if i < settings.photons {
+                    global_role
+                } else {
+                    caustic_role
+                };
+                splits += trace_one(scene, settings, caustic, role, &mut rng, maps, &mut scratch);
             }
             let bytes = global.memory_bytes() + caustics.memory_bytes();
             if used.fetch_add(bytes, Ordering::Relaxed) + bytes > settings.max_map_bytes {
@@ -138,6 +179,7 @@ pub fn trace_photons(
         global,
         caustic: caustic_map,
         emitted: settings.photons as u64,
+        caustic_emitted: (caustic_photons - settings.photons) as u64,
         splits,
     })
 }
@@ -150,6 +192,8 @@ struct TraceScratch {
     stack: Vec<Path>,
     spare: Vec<Vec<f32>>,
     texel: Vec<f32>,
+    /// A global photon's flux scaled for its caustic record.
+    scaled: Vec<f32>,
 }
 
 /// Emits and traces one photon; returns the number of dispersive splits.
@@ -157,6 +201,7 @@ fn trace_one(
     scene: &SpectralScene,
     settings: &PhotonSettings,
     caustic: bool,
+    role: Role,
     rng: &mut Rng,
     (global, caustics): (&mut PhotonBatch, &mut PhotonBatch),
     scratch: &mut TraceScratch,
@@ -165,12 +210,14 @@ fn trace_one(
         stack,
         spare,
         texel,
+        scaled,
     } = scratch;
     let mut flux = spare.pop().unwrap_or_default();
+    let among = role.emitted_among;
     let Some((origin, dir)) =
         scene
             .lights
-            .emit_into(&scene.tris, &scene.accel, settings.photons, rng, &mut flux)
+            .emit_into(&scene.tris, &scene.accel, among, rng, &mut flux)
     else {
         spare.push(flux);
         return 0;
@@ -197,9 +244,22 @@ fn trace_one(
             mat.absorb_inside(&hit, &mut path.flux);
             match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {
+                    let caustic_path = caustic && path.specular_seen && !path.diffuse_seen;
+                    if !role.global {
+                        if caustic_path {
+                            caustics.push(grid, p, nf, &path.flux);
+                        }
+                        break;
+                    }
                     global.push(grid, p, nf, &path.flux);
-                    if caustic && path.specular_seen && !path.diffuse_seen {
-                        caustics.push(grid, p, nf, &path.flux);
+                    if caustic_path {
+                        if role.caustic_scale == 1.0 {
+                            caustics.push(grid, p, nf, &path.flux);
+                        } else {
+                            scaled.clear();
+                            scaled.extend(path.flux.iter().map(|f| f * role.caustic_scale));
+                            caustics.push(grid, p, nf, scaled);
+                        }
                     }
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
                     if !russian_roulette(&mut path.flux, reflectance, rng.next_f32()) {

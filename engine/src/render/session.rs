@@ -61,6 +61,8 @@ pub struct MemoryReport {
 pub struct RenderStats {
     pub passes: u64,
     pub photons_emitted: u64,
+    /// Photons emitted for the caustic map only ([`RenderSettings::caustic_factor`]).
+    pub caustic_photons_emitted: u64,
     /// Photons stored in the latest pass's maps.
     pub stored_global: u64,
     pub stored_caustic: u64,
@@ -370,6 +372,7 @@ impl RenderSession {
                 max_bounces: self.settings.max_bounces,
                 dispersion_split: self.settings.dispersion_split,
                 caustic_map: true,
+                caustic_factor: self.settings.caustic_factor,
                 max_map_bytes: budget,
             };
             let seed = self.settings.seed;
@@ -390,7 +393,7 @@ impl RenderSession {
     }
 
     /// This pass's density-estimate kernels. Each map's radius adapts per query to its
-    /// k nearest photons (`global_k`, `caustic_k`), searched out to a cap, and shrinks
+    /// k nearest photons (`global_k`, [`RenderSettings::caustic_neighbours`]), searched out to a cap, and shrinks
     /// with passes by the Knaus–Zwicker factor; a radius given in the settings is used as
     /// a fixed radius instead. The first pass also measures the median k-nearest distance
     /// over the photons (`typical`), which sets the caps and is reported.
@@ -411,7 +414,7 @@ impl RenderSession {
         if self.r1_caustic.is_none()
             && let Some(c) = &maps.caustic
         {
-            self.r1_caustic = c.typical_knn_radius(self.settings.caustic_k, 256);
+            self.r1_caustic = c.typical_knn_radius(self.settings.caustic_neighbours(), 256);
         }
         let diag = scene.diagonal().max(1e-6);
         let shrink = self.radius_sq_factor.sqrt() as f32;
@@ -442,7 +445,7 @@ impl RenderSession {
         );
         let caustic = kernel(
             self.settings.caustic_radius,
-            self.settings.caustic_k,
+            self.settings.caustic_neighbours(),
             typical_caustic,
             CAUSTIC_CAP_TYPICAL * typical_caustic,
         );
@@ -525,6 +528,7 @@ impl RenderSession {
         st.passes = self.film.passes();
         st.photons_last_pass = photons as u64;
         st.photons_emitted += maps.emitted;
+        st.caustic_photons_emitted += maps.caustic_emitted;
         st.stored_global = maps.global.len() as u64;
         st.stored_caustic = maps.caustic.as_ref().map_or(0, |c| c.len() as u64);
         st.spike_records = maps.global.spike_records() as u64

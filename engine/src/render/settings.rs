@@ -30,11 +30,23 @@ pub struct RenderSettings {
     pub global_radius: Option<f32>,
     /// First-pass gather radius of the caustic map; None: estimated.
     pub caustic_radius: Option<f32>,
-    /// Neighbours used to estimate the first-pass radii.
+    /// Neighbours a global-map density estimate adapts its radius to.
     pub global_k: usize,
+    /// Neighbours a caustic-map estimate adapts its radius to, per unit of
+    /// `caustic_factor`: the estimate gathers `caustic_k × caustic_factor` photons
+    /// ([`RenderSettings::caustic_neighbours`]), so extra caustic photons lower the noise
+    /// at the same radius (the same blur) instead of shrinking the radius at the same
+    /// noise.
     pub caustic_k: usize,
     /// Most single-bin photons one photon splits into at dispersive glass.
     pub dispersion_split: usize,
+    /// Photons emitted for the caustic map per pass, as a multiple of `photons_per_pass`
+    /// (`--caustic-factor`; 1: only the global photons' caustic paths). The extra photons
+    /// follow specular bounces only and end at their first diffuse hit, so a caustic is
+    /// sampled this many times more densely for little more than one ray per photon that
+    /// misses the glass. Ignored where the scene has no mirror or glass.
+    #[serde(default = "default_caustic_factor")]
+    pub caustic_factor: usize,
     /// Most bytes one pass's photon maps may take; None: a quarter of the machine's RAM.
     /// Photons per pass are lowered to fit (and the stats say so).
     pub photon_budget_bytes: Option<usize>,
@@ -75,6 +87,7 @@ impl Default for RenderSettings {
             global_k: 48,
             caustic_k: 24,
             dispersion_split: 4,
+            caustic_factor: DEFAULT_CAUSTIC_FACTOR,
             photon_budget_bytes: None,
             spectra: Upsampling::default(),
         }
@@ -105,6 +118,15 @@ pub(crate) fn out_of_range(
         value: value.to_string(),
         reason: reason.to_string(),
     }
+}
+
+/// Default caustic photons per global photon (the speed bench, issue #12).
+pub const DEFAULT_CAUSTIC_FACTOR: usize = 4;
+/// Largest accepted caustic factor.
+pub const MAX_CAUSTIC_FACTOR: usize = 256;
+
+fn default_caustic_factor() -> usize {
+    DEFAULT_CAUSTIC_FACTOR
 }
 
 /// Default safety cap on path bounces (see [`RenderSettings::max_bounces`]).
@@ -184,6 +206,11 @@ impl RenderSettings {
         }
     }
 
+    /// Neighbours of a caustic-map estimate: `caustic_k` per unit of `caustic_factor`.
+    pub fn caustic_neighbours(&self) -> usize {
+        self.caustic_k.saturating_mul(self.caustic_factor.max(1))
+    }
+
     /// Light channels these settings transport in (bins, or 3 for RGB).
     pub fn channels(&self) -> usize {
         self.storage.channels(self.bins)
@@ -229,6 +256,22 @@ impl RenderSettings {
             let reason = format!("the split count must be between 1 and {MAX_BINS}");
             return Err(out_of_range("--split", self.dispersion_split, reason));
         }
+        if self.caustic_factor == 0 || self.caustic_factor > MAX_CAUSTIC_FACTOR {
+            let reason = format!("the caustic factor must be between 1 and {MAX_CAUSTIC_FACTOR}");
+            return Err(out_of_range(
+                "--caustic-factor",
+                self.caustic_factor,
+                reason,
+            ));
+        }
+        if self.photons_per_pass.saturating_mul(self.caustic_factor) > 4 * MAX_PHOTONS_PER_PASS {
+            let n = self.photons_per_pass.saturating_mul(self.caustic_factor);
+            let reason = format!(
+                "photons per pass × caustic factor must be at most {}",
+                4 * MAX_PHOTONS_PER_PASS
+            );
+            return Err(out_of_range("--caustic-factor", n, reason));
+        }
         if let Some(b) = self.photon_budget_bytes
             && b < MIN_PHOTON_BUDGET
         {
@@ -266,6 +309,13 @@ impl RenderSettings {
                     "neighbours must be between 1 and 10000",
                 ));
             }
+        }
+        if self.caustic_neighbours() > 10_000 {
+            let reason = format!(
+                "--caustic-k × --caustic-factor ({} × {}) must be at most 10000",
+                self.caustic_k, self.caustic_factor
+            );
+            return Err(out_of_range("--caustic-k", self.caustic_k, reason));
         }
         Ok(())
     }
@@ -398,5 +448,11 @@ mod tests {
             ..RenderSettings::default()
         };
         rgb.validate().unwrap();
+        let bad = RenderSettings {
+            caustic_factor: 0,
+            ..RenderSettings::default()
+        };
+        let msg = bad.validate().unwrap_err().to_string();
+        assert!(msg.starts_with("--caustic-factor 0:"), "{msg}");
     }
 }
