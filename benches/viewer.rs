@@ -86,17 +86,24 @@ fn main() {
         .iter()
         .fold((0.0, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
     let used = &h.state().settings;
+    let pool = h.state().worker_pool();
     println!(
-        "viewer benchmark: prism {}×{}, {} photons/pass, {} final-gather rays, {} bins {}, {} worker threads",
+        "viewer benchmark: prism {}×{}, {} photons/pass, {} final-gather rays, {} bins {}, {} worker threads{}",
         used.width,
         used.height,
         used.photons_per_pass,
         used.final_gather_rays,
         used.bins,
         used.storage.name(),
-        std::thread::available_parallelism()
-            .map(|n| n.get().saturating_sub(1).max(1))
-            .unwrap_or(1)
+        pool.map_or(0, |p| p.threads),
+        if pool.is_some_and(|p| p.below_ui) {
+            format!(
+                " at nice {}, below the UI thread",
+                prismap::app::WORKER_NICE
+            )
+        } else {
+            " (one core left to the UI)".to_string()
+        }
     );
     println!(
         "UI frame time over {n} frames: median {med:.2} ms, 99th percentile {p99:.2} ms (target median ≤ 16 ms)"

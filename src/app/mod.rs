@@ -10,6 +10,7 @@ mod orbit;
 pub mod panels;
 pub use panels::format_bytes;
 pub mod worker;
+pub use worker::{PoolInfo, WORKER_NICE};
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -378,6 +379,11 @@ impl ViewerApp {
         self.send_probes();
     }
 
+    /// The render worker's threads and priority (None until its pool is up).
+    pub fn worker_pool(&self) -> Option<PoolInfo> {
+        self.worker.pool()
+    }
+
     /// Error of the current render, if it failed.
     pub fn render_error(&self) -> Option<String> {
         self.worker.error()
@@ -610,7 +616,7 @@ impl ViewerApp {
                 self.settings.storage = storage;
                 self.restart();
             }
-            ctx.request_repaint();
+            ctx.request_repaint_after(std::time::Duration::from_millis(100));
             return;
         }
         if !self.capture_requested && current && passes >= c.after_passes {
@@ -630,8 +636,12 @@ impl ViewerApp {
                 done.store(true, Ordering::SeqCst);
                 ctx2.request_repaint();
             });
+            ctx.request_repaint();
+            return;
         }
-        ctx.request_repaint();
+        // The worker's news repaints; this only polls for the pass count, so that a
+        // software-rendered window does not spend a core on frames nobody needs.
+        ctx.request_repaint_after(std::time::Duration::from_millis(100));
     }
 
     /// The whole UI for one frame.

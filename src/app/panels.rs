@@ -390,6 +390,12 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                             },
                         );
                         row("photons emitted", st.photons_emitted.to_string());
+                        if st.caustic_photons_emitted > 0 {
+                            row(
+                                "+ for caustics",
+                                st.caustic_photons_emitted.to_string(),
+                            );
+                        }
                         row("stored (global)", st.stored_global.to_string());
                         row("stored (caustic)", st.stored_caustic.to_string());
                         row("spike records", st.spike_records.to_string());
@@ -401,6 +407,14 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                             "samples per second",
                             format!("{:.0}", pixels * st.passes as f64 / secs.max(1e-9)),
                         );
+                        if let Some(pool) = app.worker_pool() {
+                            let priority = if pool.below_ui {
+                                "below the UI"
+                            } else {
+                                "one core left to the UI"
+                            };
+                            row("render threads", format!("{} ({priority})", pool.threads));
+                        }
                         row("radius (global)", format!("{:.4}", st.r_global));
                         if st.r_caustic > 0.0 {
                             row("radius (caustic)", format!("{:.4}", st.r_caustic));

@@ -85,6 +85,17 @@ fn upscale(img: &Image, width: u32, height: u32) -> Image {
 struct Shared {
     snapshot: Mutex<Option<Snapshot>>,
     error: Mutex<Option<(u64, String)>>,
+    /// The render pool's threads and whether they run below the UI's priority, once the
+    /// pool is up.
+    pool: Mutex<Option<PoolInfo>>,
+}
+
+/// How the worker renders: its thread count and priority.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PoolInfo {
+    pub threads: usize,
+    /// The render threads run at nice [`WORKER_NICE`], below the UI thread.
+    pub below_ui: bool,
 }
 
 pub struct Worker {
@@ -168,6 +179,15 @@ impl Worker {
     pub fn generation(&self) -> u64 {
         self.generation.load(Ordering::SeqCst)
     }
+
+    /// The render pool's threads and priority (None until the worker has started it).
+    pub fn pool(&self) -> Option<PoolInfo> {
+        *self
+            .shared
+            .pool
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+    }
 }
 
 impl Drop for Worker {
@@ -191,6 +211,36 @@ struct Job {
     started: Instant,
 }
 
+/// Nice value of the render threads: well below the UI thread's 0, so that the
+/// scheduler runs the UI first whenever it has a frame to build.
+pub const WORKER_NICE: i32 = 10;
+
+/// Lowers the calling thread's scheduling priority to [`WORKER_NICE`] (Linux, where a
+/// thread has its own nice value); false where that is not possible.
+pub fn lower_thread_priority() -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: gettid and setpriority take plain integers and touch no memory.
+        let tid = unsafe { libc::gettid() } as libc::id_t;
+        let current = unsafe { libc::getpriority(libc::PRIO_PROCESS, tid) };
+        unsafe { libc::setpriority(libc::PRIO_PROCESS, tid, WORKER_NICE.max(current)) == 0 }
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        false
+    }
+}
+
+/// Render threads for `cores` cores: all of them when they run below the UI's priority,
+/// else all but one.
+pub fn worker_threads(cores: usize, lowered: bool) -> usize {
+    if lowered {
+        cores.max(1)
+    } else {
+        cores.saturating_sub(1).max(1)
+    }
+}
+
 fn run(
     rx: Receiver<Command>,
     shared: Arc<Shared>,
@@ -198,18 +248,29 @@ fn run(
     current: Arc<AtomicU64>,
     repaint: impl Fn() + Sync,
 ) {
-    // Leave one core to the UI. (Rendering on every core at a lower priority made passes
-    // 3–5× slower in a software-rendered window — lavapipe under Xvfb paints at normal
-    // priority and took the CPU — although the headless benchmark gained; see BENCHMARKS.)
-    let threads = std::thread::available_parallelism()
-        .map(|n| n.get().saturating_sub(1).max(1))
-        .unwrap_or(1);
+    // Every core renders, at a lower priority than the UI thread, so a frame is never
+    // queued behind a pass. Where a thread's priority cannot be lowered, one core is
+    // left to the UI instead.
+    let lowered = lower_thread_priority();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = worker_threads(cores, lowered);
     let pool = match rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("prismap-pass-{i}"))
+        .start_handler(move |_| {
+            if lowered {
+                lower_thread_priority();
+            }
+        })
         .build()
     {
-        Ok(p) => p,
+        Ok(p) => {
+            *shared.pool.lock().unwrap_or_else(PoisonError::into_inner) = Some(PoolInfo {
+                threads,
+                below_ui: lowered,
+            });
+            p
+        }
         Err(e) => {
             *shared.error.lock().unwrap_or_else(PoisonError::into_inner) = Some((
                 current.load(Ordering::SeqCst),
