@@ -1,5 +1,6 @@
 //! Viewer responsiveness while rendering (issue #3): run with
-//! `cargo bench --bench viewer` (PRISMAP_BENCH_SECONDS sets the length, default 30).
+//! `cargo bench --bench viewer` (PRISMAP_BENCH_SECONDS sets the length, default 30;
+//! PRISMAP_BENCH_PHOTONS, _FG, _CAUSTIC_FACTOR and _BINS the render settings).
 //!
 //! Drives the real `ViewerApp` headless through egui_kittest at ~60 Hz on the prism at
 //! 512×512 and prints: UI frame time (CPU time to build the frame; GPU painting is not
@@ -23,12 +24,23 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(30.0);
+    // PRISMAP_BENCH_PHOTONS / _FG / _CAUSTIC_FACTOR / _BINS change the settings.
+    let env = |name: &str, default: usize| {
+        std::env::var(name)
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(default)
+    };
+    let defaults = RenderSettings::default();
     let settings = RenderSettings {
         width: 512,
         height: 512,
-        photons_per_pass: 50_000,
+        photons_per_pass: env("PRISMAP_BENCH_PHOTONS", 50_000),
+        final_gather_rays: env("PRISMAP_BENCH_FG", defaults.final_gather_rays as usize) as u32,
+        caustic_factor: env("PRISMAP_BENCH_CAUSTIC_FACTOR", defaults.caustic_factor),
+        bins: env("PRISMAP_BENCH_BINS", defaults.bins),
         storage: Storage::Compact,
-        ..RenderSettings::default()
+        ..defaults
     };
     let ctx = egui::Context::default();
     let app = ViewerApp::new(&ctx, SceneSource::Builtin("prism".into()), settings, None);
@@ -88,10 +100,11 @@ fn main() {
     let used = &h.state().settings;
     let pool = h.state().worker_pool();
     println!(
-        "viewer benchmark: prism {}×{}, {} photons/pass, {} final-gather rays, {} bins {}, {} worker threads{}",
+        "viewer benchmark: prism {}×{}, {} photons/pass (caustic ×{}), {} final-gather rays, {} bins {}, {} worker threads{}",
         used.width,
         used.height,
         used.photons_per_pass,
+        used.caustic_factor,
         used.final_gather_rays,
         used.bins,
         used.storage.name(),

@@ -286,3 +286,57 @@ fn grid_rejects_absurd_settings() {
     assert_eq!(g.bin_of(830.0), Some(9));
     assert_eq!(g.bin_of(360.0), Some(0));
 }
+
+#[test]
+fn vector_reductions_agree_with_plain_loops_at_every_length() {
+    for n in [0usize, 1, 3, 4, 7, 8, 9, 15, 16, 17, 20, 100, 101, 4096] {
+        let a: Vec<f32> = (0..n)
+            .map(|i| ((i * 37 % 11) as f32 + 0.5) * 1e-3)
+            .collect();
+        let exact: f64 = a.iter().map(|&v| v as f64).sum();
+        let s = spd::sum(&a) as f64;
+        assert!(
+            (s - exact).abs() <= 1e-6 * exact.max(1e-30),
+            "n={n}: {s} vs {exact}"
+        );
+        if (1..8).contains(&n) {
+            let plain: f32 = a.iter().sum();
+            assert_eq!(
+                spd::sum(&a).to_bits(),
+                plain.to_bits(),
+                "n={n}: bit for bit"
+            );
+        }
+        assert!(spd::all_finite(&a));
+        assert_eq!(spd::single_nonzero(&a), if n == 1 { Some(0) } else { None });
+        for k in 0..n.min(40) {
+            let mut b = a.clone();
+            b[k] = f32::NAN;
+            assert!(!spd::all_finite(&b), "n={n}: NaN at {k}");
+            b[k] = f32::INFINITY;
+            assert!(!spd::all_finite(&b), "n={n}: ∞ at {k}");
+            let mut one = vec![0.0f32; n];
+            one[k] = 2.0;
+            assert_eq!(spd::single_nonzero(&one), Some(k), "n={n}");
+            if k + 1 < n {
+                one[n - 1] = -1.0;
+                assert_eq!(spd::single_nonzero(&one), None, "n={n}: two entries");
+            }
+        }
+    }
+    // The colour conversion with interleaved partial sums against a plain f64 loop.
+    for bins in [1usize, 3, 4, 5, 20, 100] {
+        let grid = BinGrid::with_bins(bins).unwrap();
+        let v: Vec<f32> = (0..bins).map(|i| 0.1 + (i % 5) as f32).collect();
+        let rgb = grid.to_linear_srgb(&v);
+        let w = grid.srgb_weights();
+        for c in 0..3 {
+            let exact: f64 = w.iter().zip(&v).map(|(w, &x)| w[c] as f64 * x as f64).sum();
+            assert!(
+                (rgb[c] as f64 - exact).abs() <= 1e-5 * exact.abs().max(1e-6),
+                "{bins} bins, channel {c}: {} vs {exact}",
+                rgb[c]
+            );
+        }
+    }
+}
