@@ -153,15 +153,33 @@ impl ReportError {
     }
 }
 
+/// The running executable's size and modification time (seconds), which change with
+/// every build: what keeps a cached reference from outliving the engine that made it.
+fn build_identity() -> Option<(u64, u64)> {
+    let meta = std::env::current_exe().ok()?.metadata().ok()?;
+    let modified = meta
+        .modified()
+        .ok()?
+        .duration_since(std::time::UNIX_EPOCH)
+        .ok()?;
+    Some((meta.len(), modified.as_secs()))
+}
+
 impl Report {
-    /// The reference render of a scene, cached with its settings.
+    /// The reference render of a scene, cached with its settings and the build that made
+    /// it.
     fn reference(&self, scene: &str) -> Result<PathBuf, ReportError> {
         let exr = self.out.join(format!("reference-{scene}.exr"));
         let meta = self.out.join(format!("reference-{scene}.json"));
+        // The engine that rendered it is part of the key: a reference kept from an older
+        // build (another camera, another estimator) would measure every run against the
+        // wrong image. The executable's size and modification time stand for the build.
         let wanted = serde_json::json!({
             "scene": scene, "storage": "full", "bins": self.plan.reference_bins,
             "photons_per_pass": self.plan.reference_photons, "passes": self.plan.reference_passes,
             "size": self.plan.size, "final_gather_rays": self.plan.final_gather_rays, "seed": 1,
+            "defaults": RenderSettings::default(),
+            "build": build_identity(),
         });
         if exr.exists()
             && let Ok(text) = std::fs::read_to_string(&meta)
