@@ -253,7 +253,12 @@ fn run(
     // left to the UI instead.
     let lowered = lower_thread_priority();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = worker_threads(cores, lowered);
+    // PRISMAP_VIEWER_THREADS=N overrides the count (for measuring the viewer).
+    let threads = std::env::var("PRISMAP_VIEWER_THREADS")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+        .filter(|&n| (1..=crate::render::settings::MAX_THREADS).contains(&n))
+        .unwrap_or_else(|| worker_threads(cores, lowered));
     let pool = match rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("prismap-pass-{i}"))
