@@ -76,9 +76,11 @@ fn crop(image: &Image, (x0, y0, x1, y1): Rect) -> Image {
     }
 }
 
-/// The rainbow: the bounding box (plus a 4-pixel margin) of the pixels that are, with
-/// all 8 neighbours, saturated (max − min over max > 0.6) and bright (luminance above a
-/// 0.03 of the image's 99.5th percentile: violet is dim) — a patch, not the glints in the glass.
+/// The rainbow: the bounding box (plus a 4-pixel margin) of the largest 8-connected patch
+/// of pixels that are, with all 8 neighbours, saturated (max − min over max > 0.6) and
+/// bright (luminance above a 0.03 of the image's 99.5th percentile: violet is dim) — the
+/// spectrum on the floor, not the glints in the glass nor the small streaks the prism's
+/// faces reflect onto the walls.
 fn rainbow_region(image: &Image) -> Rect {
     let lum = |p: &[f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
     let mut sorted: Vec<f32> = image.pixels.iter().map(lum).collect();
@@ -89,20 +91,53 @@ fn rainbow_region(image: &Image) -> Rect {
         let (hi, lo) = (p[0].max(p[1]).max(p[2]), p[0].min(p[1]).min(p[2]));
         lum(&p) > bright && hi > 0.0 && (hi - lo) / hi > 0.6
     };
-    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
-    for y in 1..image.height - 1 {
-        for x in 1..image.width - 1 {
-            if (y - 1..=y + 1).all(|qy| (x - 1..=x + 1).all(|qx| coloured(qx, qy))) {
-                (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
-            }
+    let (w, h) = (image.width, image.height);
+    let mut core = vec![false; (w * h) as usize];
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            core[(y * w + x) as usize] =
+                (y - 1..=y + 1).all(|qy| (x - 1..=x + 1).all(|qx| coloured(qx, qy)));
         }
     }
-    assert!(x1 > x0, "no rainbow found in the reference");
+    // The largest 8-connected patch of core pixels, by flood fill.
+    let mut seen = vec![false; core.len()];
+    let mut best: Option<(usize, Rect)> = None;
+    for start in 0..core.len() {
+        if !core[start] || seen[start] {
+            continue;
+        }
+        let (mut count, mut rect) = (0usize, (u32::MAX, u32::MAX, 0u32, 0u32));
+        let mut stack = vec![start];
+        seen[start] = true;
+        while let Some(i) = stack.pop() {
+            let (x, y) = (i as u32 % w, i as u32 / w);
+            count += 1;
+            rect = (
+                rect.0.min(x),
+                rect.1.min(y),
+                rect.2.max(x + 1),
+                rect.3.max(y + 1),
+            );
+            for qy in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+                for qx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                    let j = (qy * w + qx) as usize;
+                    if core[j] && !seen[j] {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        if best.is_none_or(|(c, _)| count > c) {
+            best = Some((count, rect));
+        }
+    }
+    let (_, (x0, y0, x1, y1)) = best.expect("no rainbow found in the reference");
     (
         x0.saturating_sub(4),
         y0.saturating_sub(4),
-        (x1 + 4).min(image.width),
-        (y1 + 4).min(image.height),
+        (x1 + 4).min(w),
+        (y1 + 4).min(h),
     )
 }
 

@@ -876,6 +876,9 @@ fn extra_caustic_photons_sample_the_same_caustic_and_leave_the_global_map_alone(
     let ratio = c4.len() as f64 / c1.len() as f64;
     assert!((3.6..4.4).contains(&ratio), "caustic records ×{ratio:.2}");
     let (t4, td) = (total(&c4), total(&cd));
+    eprintln!(
+        "caustic records ×{ratio:.3}; flux per bin, factor 4: {t4:?}, 4× the photons: {td:?}"
+    );
     for b in 0..bins {
         let rel = t4[b] / td[b] - 1.0;
         assert!(
