@@ -35,7 +35,10 @@ fn main() {
     let settings = RenderSettings {
         width: 512,
         height: 512,
-        photons_per_pass: env("PRISMAP_BENCH_PHOTONS", 50_000),
+        photons_per_pass: env(
+            "PRISMAP_BENCH_PHOTONS",
+            RenderSettings::interactive().photons_per_pass,
+        ),
         final_gather_rays: env("PRISMAP_BENCH_FG", defaults.final_gather_rays as usize) as u32,
         caustic_factor: env("PRISMAP_BENCH_CAUSTIC_FACTOR", defaults.caustic_factor),
         bins: env("PRISMAP_BENCH_BINS", defaults.bins),
