@@ -238,6 +238,24 @@ pub fn russian_roulette(t: &mut [f32], reflectance: &[f32], u: f32) -> bool {
     russian_roulette_by(t, |i| reflectance[i], u)
 }
 
+/// [`russian_roulette`] of a flux that is `v` in one bin and zero elsewhere, by that
+/// bin's factor: the same arithmetic as on the whole vector (its sums are exactly `v`
+/// and `v`·factor), so the same photons survive with the same flux, bit for bit.
+pub fn russian_roulette_single(v: &mut f32, factor: f32, u: f32) -> bool {
+    let before = *v;
+    *v *= factor;
+    let after = *v;
+    if !(before > 0.0 && after > 0.0) {
+        return false;
+    }
+    let p = (after / before).min(1.0);
+    if u >= p {
+        return false;
+    }
+    *v *= 1.0 / p;
+    true
+}
+
 /// [`russian_roulette`] with the factor of bin i given by `factor(i)`.
 #[inline]
 fn russian_roulette_by(t: &mut [f32], factor: impl Fn(usize) -> f32, u: f32) -> bool {
@@ -260,6 +278,29 @@ fn russian_roulette_by(t: &mut [f32], factor: impl Fn(usize) -> f32, u: f32) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn single_bin_roulette_is_the_vector_roulette_bit_for_bit() {
+        let mut rng = crate::sampling::Rng::stream(3, 0, 0, crate::sampling::Purpose::Photon);
+        for bins in [1usize, 5, 20, 100] {
+            for _ in 0..2000 {
+                let b = (rng.next_f32() * bins as f32) as usize % bins;
+                let v = rng.next_f32() * 10.0;
+                let reflectance: Vec<f32> = (0..bins).map(|_| rng.next_f32() * 1.2).collect();
+                let u = rng.next_f32();
+                let mut flux = vec![0.0f32; bins];
+                flux[b] = v;
+                let mut single = v;
+                let vector = russian_roulette(&mut flux, &reflectance, u);
+                let scalar = russian_roulette_single(&mut single, reflectance[b], u);
+                assert_eq!(vector, scalar, "{bins} bins, bin {b}: survival");
+                if vector {
+                    assert_eq!(flux[b].to_bits(), single.to_bits(), "{bins} bins, bin {b}");
+                    assert!(flux.iter().enumerate().all(|(i, &x)| i == b || x == 0.0));
+                }
+            }
+        }
+    }
 
     #[test]
     fn fresnel_is_bounded_everywhere_and_one_at_grazing_and_tir() {

@@ -158,6 +158,44 @@ impl PhotonBatch {
         }
     }
 
+    /// [`PhotonBatch::push`] of a flux of `n` bins that is `value` in bin `bin` and zero
+    /// elsewhere, without reading or building the vector: the same record, bit for bit.
+    pub fn push_single(
+        &mut self,
+        grid: &BinGrid,
+        pos: Vec3,
+        normal: Vec3,
+        bin: usize,
+        value: f32,
+        n: usize,
+    ) {
+        if !(value > 0.0) || !value.is_finite() || bin >= n {
+            return;
+        }
+        self.headers.push(PhotonHeader::new(pos, normal));
+        match (self.record, grid.smits()) {
+            (Record::Spiked, Some(_)) => {
+                self.spikes += 1;
+                self.flux.extend_from_slice(&encode_spike(bin, value));
+                self.flux.extend_from_slice(&[0.0, 0.0]);
+            }
+            (Record::Compact | Record::Packed, Some(_)) => {
+                self.spikes += 1;
+                let rec = encode_spike(bin, value);
+                if self.record == Record::Packed {
+                    self.packed.push(pack_record(rec));
+                } else {
+                    self.flux.extend_from_slice(&rec);
+                }
+            }
+            _ => {
+                let start = self.flux.len();
+                self.flux.resize(start + n, 0.0);
+                self.flux[start + bin] = value;
+            }
+        }
+    }
+
     /// Bytes these photons will take in a map (records + kd axis byte).
     pub fn memory_bytes(&self) -> usize {
         if self.record == Record::Packed {
@@ -538,6 +576,51 @@ impl PhotonMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_single_bin_push_stores_what_pushing_its_vector_stores() {
+        for bins in [1usize, 4, 20, 100] {
+            let grid = BinGrid::with_bins(bins).unwrap();
+            for record in [
+                Record::Full,
+                Record::Compact,
+                Record::Packed,
+                Record::Spiked,
+            ] {
+                let (mut a, mut b) = (
+                    PhotonBatch::new(record, &grid),
+                    PhotonBatch::new(record, &grid),
+                );
+                for (k, value) in [
+                    (0usize, 1.5f32),
+                    (bins - 1, 3e-7),
+                    (bins / 2, 0.0),
+                    (0, f32::NAN),
+                    (0, -1.0),
+                ] {
+                    let mut flux = vec![0.0f32; bins];
+                    flux[k] = value;
+                    let (p, n) = (Vec3::new(k as f32, 0.5, -2.0), Vec3::Y);
+                    a.push(&grid, p, n, &flux);
+                    b.push_single(&grid, p, n, k, value, bins);
+                }
+                assert_eq!(
+                    a.len(),
+                    2,
+                    "{bins} bins {record:?}: zero, NaN and negative are dropped"
+                );
+                assert_eq!(a.len(), b.len());
+                assert_eq!(a.spikes, b.spikes);
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a.flux), bits(&b.flux), "{bins} bins {record:?}");
+                assert_eq!(a.packed, b.packed);
+                for (ha, hb) in a.headers.iter().zip(&b.headers) {
+                    assert_eq!(ha.position(), hb.position());
+                    assert_eq!(ha.normal(), hb.normal());
+                }
+            }
+        }
+    }
 
     fn error(grid: &BinGrid, flux: &[f32], rec: [f32; 5]) -> f32 {
         let mut buf = vec![0.0; flux.len()];

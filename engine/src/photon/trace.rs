@@ -20,7 +20,7 @@ use super::map::{PhotonBatch, PhotonMap};
 use super::record::Record;
 use crate::materials::{
     dielectric_bounce, metal_bounce, russian_roulette, russian_roulette_metal,
-    russian_roulette_scalar,
+    russian_roulette_scalar, russian_roulette_single,
 };
 use crate::sampling::{Purpose, Rng, cosine_hemisphere};
 use crate::scene::{SpectralScene, SurfaceKind, path_eta};
@@ -78,6 +78,9 @@ struct Path {
     /// Where within its bin a single-bin photon's wavelength lies (drawn at its first
     /// dispersive interface, kept after; see [`crate::scene::spectral::eta_in_bin`]).
     lambda_u: Option<f32>,
+    /// The one bin a split photon carries (its flux is zero elsewhere): the bounces below
+    /// then touch that bin only, with the same arithmetic as on the whole vector.
+    single: Option<usize>,
 }
 
 /// What a photon is emitted for, and how its flux is stored in the caustic map.
@@ -230,6 +233,7 @@ fn trace_one(
         diffuse_seen: false,
         specular_seen: false,
         lambda_u: None,
+        single: None,
     });
     let grid = &scene.grid;
     let mut splits = 0;
@@ -245,16 +249,20 @@ fn trace_one(
             match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {
                     let caustic_path = caustic && path.specular_seen && !path.diffuse_seen;
+                    let push = |map: &mut PhotonBatch, flux: &[f32], scale: f32| match path.single {
+                        Some(b) => map.push_single(grid, p, nf, b, flux[b] * scale, flux.len()),
+                        None => map.push(grid, p, nf, flux),
+                    };
                     if !role.global {
                         if caustic_path {
-                            caustics.push(grid, p, nf, &path.flux);
+                            push(caustics, &path.flux, 1.0);
                         }
                         break;
                     }
-                    global.push(grid, p, nf, &path.flux);
+                    push(global, &path.flux, 1.0);
                     if caustic_path {
-                        if role.caustic_scale == 1.0 {
-                            caustics.push(grid, p, nf, &path.flux);
+                        if role.caustic_scale == 1.0 || path.single.is_some() {
+                            push(caustics, &path.flux, role.caustic_scale);
                         } else {
                             scaled.clear();
                             scaled.extend(path.flux.iter().map(|f| f * role.caustic_scale));
@@ -262,7 +270,15 @@ fn trace_one(
                         }
                     }
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
-                    if !russian_roulette(&mut path.flux, reflectance, rng.next_f32()) {
+                    let survives = match path.single {
+                        Some(b) => russian_roulette_single(
+                            &mut path.flux[b],
+                            reflectance[b],
+                            rng.next_f32(),
+                        ),
+                        None => russian_roulette(&mut path.flux, reflectance, rng.next_f32()),
+                    };
+                    if !survives {
                         break;
                     }
                     path.diffuse_seen = true;
@@ -289,13 +305,13 @@ fn trace_one(
                     dispersive,
                     alpha,
                 } => {
-                    let single = spd::single_nonzero(&path.flux);
+                    let single = path.single.or_else(|| spd::single_nonzero(&path.flux));
                     if *dispersive && single.is_none() {
                         // Split here; the pieces continue from this same hit.
                         splits += 1;
                         path.depth -= 1;
                         let s = settings.dispersion_split;
-                        split_dispersive_with(&path.flux, s, rng, spare, |flux| {
+                        split_dispersive_with(&path.flux, s, rng, spare, |flux, single| {
                             stack.push(Path {
                                 origin: path.origin,
                                 dir: path.dir,
@@ -304,6 +320,7 @@ fn trace_one(
                                 diffuse_seen: path.diffuse_seen,
                                 specular_seen: path.specular_seen,
                                 lambda_u: None,
+                                single,
                             })
                         });
                         break;
@@ -316,8 +333,15 @@ fn trace_one(
                     else {
                         break;
                     };
-                    if w < 1.0 && !russian_roulette_scalar(&mut path.flux, w, rng.next_f32()) {
-                        break;
+                    if w < 1.0 {
+                        let u = rng.next_f32();
+                        let survives = match path.single {
+                            Some(b) => russian_roulette_single(&mut path.flux[b], w, u),
+                            None => russian_roulette_scalar(&mut path.flux, w, u),
+                        };
+                        if !survives {
+                            break;
+                        }
                     }
                     path.specular_seen = true;
                     path.dir = ev.dir;
@@ -340,18 +364,19 @@ pub(crate) fn micro_sample(alpha: f32, rng: &mut Rng) -> [f32; 2] {
 /// Splits a multi-bin flux into single-bin fluxes (see the module docs).
 pub fn split_dispersive(flux: &[f32], max_split: usize, rng: &mut Rng) -> Vec<Vec<f32>> {
     let mut pieces = Vec::new();
-    split_dispersive_with(flux, max_split, rng, &mut Vec::new(), |p| pieces.push(p));
+    split_dispersive_with(flux, max_split, rng, &mut Vec::new(), |p, _| pieces.push(p));
     pieces
 }
 
 /// [`split_dispersive`], each piece handed to `emit` in a buffer taken from `spare`
-/// (allocated only when `spare` is empty).
+/// (allocated only when `spare` is empty), with its one non-zero bin (None if its flux
+/// is zero).
 fn split_dispersive_with(
     flux: &[f32],
     max_split: usize,
     rng: &mut Rng,
     spare: &mut Vec<Vec<f32>>,
-    mut emit: impl FnMut(Vec<f32>),
+    mut emit: impl FnMut(Vec<f32>, Option<usize>),
 ) {
     let n = flux.len();
     let mut piece = |bin: usize, value: f32| {
@@ -359,7 +384,7 @@ fn split_dispersive_with(
         f.clear();
         f.resize(n, 0.0);
         f[bin] = value;
-        emit(f);
+        emit(f, (value != 0.0).then_some(bin));
     };
     let nonzero = flux.iter().filter(|&&v| v > 0.0).count();
     let s = max_split.max(1);
