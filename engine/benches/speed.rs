@@ -218,13 +218,14 @@ fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Ima
     // explore variants without re-rendering it).
     let cached = std::env::var("PRISMAP_BENCH_CACHE").ok().map(|dir| {
         let key = format!(
-            "{}-{}x{}-{}bins-{}passes-caustic{}.exr",
+            "{}-{}x{}-{}bins-{}passes-caustic{}x{}.exr",
             scene.name,
             settings.width,
             settings.height,
             settings.bins,
             passes,
-            settings.caustic_factor
+            settings.caustic_factor,
+            settings.caustic_neighbours()
         );
         std::path::Path::new(&dir).join(key)
     });

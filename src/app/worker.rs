@@ -254,11 +254,20 @@ fn run(
     let lowered = lower_thread_priority();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     // PRISMAP_VIEWER_THREADS=N overrides the count (for measuring the viewer).
-    let threads = std::env::var("PRISMAP_VIEWER_THREADS")
-        .ok()
-        .and_then(|v| v.parse::<usize>().ok())
-        .filter(|&n| (1..=crate::render::settings::MAX_THREADS).contains(&n))
-        .unwrap_or_else(|| worker_threads(cores, lowered));
+    let max = crate::render::settings::MAX_THREADS;
+    let threads = match std::env::var("PRISMAP_VIEWER_THREADS") {
+        Ok(v) => match v.trim().parse::<usize>() {
+            Ok(n) if (1..=max).contains(&n) => n,
+            _ => {
+                eprintln!(
+                    "warning: PRISMAP_VIEWER_THREADS={v:?} is not a thread count from 1 to {max}; using {}",
+                    worker_threads(cores, lowered)
+                );
+                worker_threads(cores, lowered)
+            }
+        },
+        Err(_) => worker_threads(cores, lowered),
+    };
     let pool = match rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("prismap-pass-{i}"))

@@ -130,31 +130,23 @@ impl PhotonBatch {
         if !(spd::sum(flux) > 0.0) || !spd::all_finite(flux) {
             return;
         }
-        self.headers.push(PhotonHeader::new(pos, normal));
         match (self.record, grid.smits()) {
-            (Record::Spiked, Some(_)) => match spd::single_nonzero(flux) {
-                Some(bin) => {
-                    self.spikes += 1;
-                    self.flux.extend_from_slice(&encode_spike(bin, flux[bin]));
-                    self.flux.extend_from_slice(&[0.0, 0.0]);
-                }
-                None => self.flux.extend_from_slice(&encode_spiked(grid, flux)),
-            },
-            (Record::Compact | Record::Packed, Some(_)) => {
-                let rec = match spd::single_nonzero(flux) {
-                    Some(bin) => {
-                        self.spikes += 1;
-                        encode_spike(bin, flux[bin])
-                    }
-                    None => grid.encode_triplet(flux),
-                };
-                if self.record == Record::Packed {
-                    self.packed.push(pack_record(rec));
-                } else {
-                    self.flux.extend_from_slice(&rec);
-                }
+            (Record::Full, _) | (_, None) => {
+                self.headers.push(PhotonHeader::new(pos, normal));
+                self.flux.extend_from_slice(flux);
             }
-            _ => self.flux.extend_from_slice(flux),
+            _ => match spd::single_nonzero(flux) {
+                // A single-bin flux is a lossless spike in every compact-family record.
+                Some(bin) => self.push_single(grid, pos, normal, bin, flux[bin], flux.len()),
+                None => {
+                    self.headers.push(PhotonHeader::new(pos, normal));
+                    match self.record {
+                        Record::Spiked => self.flux.extend_from_slice(&encode_spiked(grid, flux)),
+                        Record::Packed => self.packed.push(pack_record(grid.encode_triplet(flux))),
+                        _ => self.flux.extend_from_slice(&grid.encode_triplet(flux)),
+                    }
+                }
+            },
         }
     }
 

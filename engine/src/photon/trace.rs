@@ -249,25 +249,29 @@ fn trace_one(
             match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {
                     let caustic_path = caustic && path.specular_seen && !path.diffuse_seen;
-                    let push = |map: &mut PhotonBatch, flux: &[f32], scale: f32| match path.single {
-                        Some(b) => map.push_single(grid, p, nf, b, flux[b] * scale, flux.len()),
-                        None => map.push(grid, p, nf, flux),
+                    // A photon's record at `scale` times its flux: a split photon's one
+                    // bin, else the vector (scaled in `scaled` when it must be).
+                    let mut store = |map: &mut PhotonBatch, scale: f32| match path.single {
+                        Some(b) => {
+                            let n = path.flux.len();
+                            map.push_single(grid, p, nf, b, path.flux[b] * scale, n)
+                        }
+                        None if scale == 1.0 => map.push(grid, p, nf, &path.flux),
+                        None => {
+                            scaled.clear();
+                            scaled.extend(path.flux.iter().map(|f| f * scale));
+                            map.push(grid, p, nf, scaled)
+                        }
                     };
                     if !role.global {
                         if caustic_path {
-                            push(caustics, &path.flux, 1.0);
+                            store(caustics, 1.0);
                         }
                         break;
                     }
-                    push(global, &path.flux, 1.0);
+                    store(global, 1.0);
                     if caustic_path {
-                        if role.caustic_scale == 1.0 || path.single.is_some() {
-                            push(caustics, &path.flux, role.caustic_scale);
-                        } else {
-                            scaled.clear();
-                            scaled.extend(path.flux.iter().map(|f| f * role.caustic_scale));
-                            caustics.push(grid, p, nf, scaled);
-                        }
+                        store(caustics, role.caustic_scale);
                     }
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
                     let survives = match path.single {

@@ -265,12 +265,17 @@ impl RenderSettings {
             ));
         }
         if self.photons_per_pass.saturating_mul(self.caustic_factor) > 4 * MAX_PHOTONS_PER_PASS {
-            let n = self.photons_per_pass.saturating_mul(self.caustic_factor);
             let reason = format!(
-                "photons per pass × caustic factor must be at most {}",
+                "--photons × --caustic-factor ({} × {}) must be at most {}",
+                self.photons_per_pass,
+                self.caustic_factor,
                 4 * MAX_PHOTONS_PER_PASS
             );
-            return Err(out_of_range("--caustic-factor", n, reason));
+            return Err(out_of_range(
+                "--caustic-factor",
+                self.caustic_factor,
+                reason,
+            ));
         }
         if let Some(b) = self.photon_budget_bytes
             && b < MIN_PHOTON_BUDGET
@@ -454,5 +459,25 @@ mod tests {
         };
         let msg = bad.validate().unwrap_err().to_string();
         assert!(msg.starts_with("--caustic-factor 0:"), "{msg}");
+        let bad = RenderSettings {
+            photons_per_pass: MAX_PHOTONS_PER_PASS,
+            caustic_factor: 8,
+            ..RenderSettings::default()
+        };
+        let msg = bad.validate().unwrap_err().to_string();
+        assert!(
+            msg.starts_with("--caustic-factor 8:") && msg.contains("50000000 × 8"),
+            "{msg}"
+        );
+        let bad = RenderSettings {
+            caustic_k: 1000,
+            caustic_factor: 16,
+            ..RenderSettings::default()
+        };
+        let msg = bad.validate().unwrap_err().to_string();
+        assert!(
+            msg.starts_with("--caustic-k 1000:") && msg.contains("1000 × 16"),
+            "{msg}"
+        );
     }
 }
