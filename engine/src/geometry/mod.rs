@@ -11,6 +11,25 @@ pub struct Hit {
     pub prim: u32,
 }
 
+/// obvhs' CWBVH node test ignores the ray's t_min and culls every child box the ray
+/// leaves before t = 1e-4 (`cwbvh::node::EPSILON`, in the ray's parameter): a triangle
+/// nearer than that to a ray's origin was never hit. Rays start within that of a wall at
+/// every corner of a room (a shadow ray from a wall 6·10⁻⁵ below the ceiling passed through
+/// it and lit the inside of a closed box), and in a scene modelled at millimetre scale it
+/// is a tenth of the scene. So every ray starts [`BACK_OFF`] behind its origin with t_min =
+/// [`BACK_OFF`]: the node test then passes the near boxes, the triangle test (which does
+/// honour t_min) still refuses anything behind the true origin.
+const BACK_OFF: f32 = 2e-4;
+
+/// An obvhs ray from `origin` along `dir` over t in [0, `t_max`], backed off (see
+/// [`BACK_OFF`]); the hits' t then count from `origin - BACK_OFF·dir`.
+#[inline]
+fn backed_off_ray(origin: Vec3, dir: Vec3, t_max: f32) -> obvhs::ray::Ray {
+    let dir = positive_zeros(dir);
+    let start = Vec3A::from(origin) - Vec3A::from(dir) * BACK_OFF;
+    obvhs::ray::Ray::new(start, Vec3A::from(dir), BACK_OFF, t_max + BACK_OFF)
+}
+
 /// `dir` with every −0.0 component made +0.0: obvhs' traversal misses everything along a
 /// ray with a negative-zero component (a sun shining straight down along (−0, −1, −0)
 /// lit nothing).
@@ -189,15 +208,14 @@ impl Accel {
         if self.tris.is_empty() {
             return None;
         }
-        let dir = positive_zeros(dir);
-        let ray = obvhs::ray::Ray::new(Vec3A::from(origin), Vec3A::from(dir), 0.0, t_max);
+        let ray = backed_off_ray(origin, dir, t_max);
         let mut hit = RayHit::none();
         if self
             .bvh
             .ray_traverse(ray, &mut hit, |r, id| self.tris[id].intersect(r))
         {
             Some(Hit {
-                t: hit.t,
+                t: (hit.t - BACK_OFF).max(0.0),
                 prim: self.ids[hit.primitive_id as usize],
             })
         } else {
@@ -211,8 +229,7 @@ impl Accel {
         if self.tris.is_empty() {
             return false;
         }
-        let dir = positive_zeros(dir);
-        let ray = obvhs::ray::Ray::new(Vec3A::from(origin), Vec3A::from(dir), 0.0, t_max);
+        let ray = backed_off_ray(origin, dir, t_max);
         !self
             .bvh
             .ray_traverse_miss(ray, |r, id| self.tris[id].intersect(r))
@@ -330,6 +347,29 @@ mod tests {
                 }
             }
             assert_eq!(fails, 0, "offset {off} scale {scale}");
+        }
+    }
+
+    #[test]
+    fn a_triangle_right_in_front_of_a_ray_is_hit_at_any_scale() {
+        // obvhs' node test culls boxes the ray leaves before t = 1e-4: a ray starting
+        // 6·10⁻⁵ below a ceiling (a shadow ray from a wall's top row) went through it.
+        for scale in [1e-3f32, 1.0, 1e3] {
+            let accel = Accel::new(&quad(scale, scale, Vec3::ZERO));
+            for gap in [1e-6f32, 3e-5, 6e-5, 1e-4, 3e-4, 1e-2] {
+                let o = Vec3::new(0.1 * scale, -0.2 * scale, scale - gap * scale);
+                let dir = Vec3::new(0.7, 0.1, 0.7).normalize();
+                let t = gap * scale / dir.z;
+                let hit = accel.intersect(o, dir, f32::INFINITY);
+                assert!(
+                    hit.is_some_and(|h| (h.t - t).abs() <= 1e-5 * scale + 1e-6 * t),
+                    "scale {scale}, gap {gap}: {hit:?}, expected t {t}"
+                );
+                assert!(accel.occluded(o, dir, 2.0 * t), "scale {scale}, gap {gap}");
+                assert!(!accel.occluded(o, dir, 0.5 * t), "scale {scale}, gap {gap}");
+                // Nothing behind the origin is hit.
+                assert!(accel.intersect(o, -dir, f32::INFINITY).is_none());
+            }
         }
     }
 
