@@ -1,6 +1,6 @@
 //! Viewer responsiveness while rendering (issue #3): run with
 //! `cargo bench --bench viewer` (PRISMAP_BENCH_SECONDS sets the length, default 30;
-//! PRISMAP_BENCH_PHOTONS, _FG, _CAUSTIC_FACTOR and _BINS the render settings).
+//! PRISMAP_BENCH_PHOTONS, _FG, _SAMPLES, _CAUSTIC_FACTOR and _BINS the render settings).
 //!
 //! Drives the real `ViewerApp` headless through egui_kittest at ~60 Hz on the prism at
 //! 512×512 and prints: UI frame time (CPU time to build the frame; GPU painting is not
@@ -24,7 +24,7 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(30.0);
-    // PRISMAP_BENCH_PHOTONS / _FG / _CAUSTIC_FACTOR / _BINS change the settings.
+    // PRISMAP_BENCH_PHOTONS / _FG / _SAMPLES / _CAUSTIC_FACTOR / _BINS change the settings.
     let env = |name: &str, default: usize| {
         std::env::var(name)
             .ok()
@@ -40,6 +40,7 @@ fn main() {
             RenderSettings::interactive().photons_per_pass,
         ),
         final_gather_rays: env("PRISMAP_BENCH_FG", defaults.final_gather_rays as usize) as u32,
+        camera_samples: env("PRISMAP_BENCH_SAMPLES", defaults.camera_samples as usize) as u32,
         caustic_factor: env("PRISMAP_BENCH_CAUSTIC_FACTOR", defaults.caustic_factor),
         bins: env("PRISMAP_BENCH_BINS", defaults.bins),
         storage: Storage::Compact,
@@ -103,12 +104,13 @@ fn main() {
     let used = &h.state().settings;
     let pool = h.state().worker_pool();
     println!(
-        "viewer benchmark: prism {}×{}, {} photons/pass (caustic ×{}), {} final-gather rays, {} bins {}, {} worker threads{}",
+        "viewer benchmark: prism {}×{}, {} photons/pass (caustic ×{}), {} final-gather rays, {} camera samples, {} bins {}, {} worker threads{}",
         used.width,
         used.height,
         used.photons_per_pass,
         used.caustic_factor,
         used.final_gather_rays,
+        used.camera_samples,
         used.bins,
         used.storage.name(),
         pool.map_or(0, |p| p.threads),

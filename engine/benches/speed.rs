@@ -18,8 +18,8 @@
 //! final-gather rays a pass), `PRISMAP_BENCH_MAX_SECONDS` (per run, default 40),
 //! `PRISMAP_BENCH_SCENE` (`cornell-box` or `prism`: one scene only), `PRISMAP_BENCH_CACHE`
 //! (a folder to keep the references in between runs) and
-//! `PRISMAP_BENCH_CORNELL` = `photons:rays,…` / `PRISMAP_BENCH_PRISM` =
-//! `bins:photons:rays:caustic_factor:caustic_k,…` (other variants). The references take the default
+//! `PRISMAP_BENCH_CORNELL` = `photons:rays[:samples],…` / `PRISMAP_BENCH_PRISM` =
+//! `bins:photons:rays:caustic_factor:caustic_k[:samples],…` (other variants). The references take the default
 //! caustic factor.
 
 use prismap_engine::metrics::psnr;
@@ -34,18 +34,29 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
-/// The `N` colon-separated whole numbers of one variant in environment variable `var`;
-/// a malformed one stops the bench with a message naming the variable and the entry.
-fn numbers<const N: usize>(var: &str, entry: &str) -> [usize; N] {
+/// The `N` colon-separated whole numbers of one variant in environment variable `var`,
+/// the last of them optional (None when left out); a malformed entry stops the bench with
+/// a message naming the variable and the entry.
+fn numbers<const N: usize>(var: &str, entry: &str) -> ([usize; N], Option<usize>) {
     let parsed: Vec<usize> = entry
         .split(':')
         .map(|x| x.trim().parse().ok())
         .collect::<Option<_>>()
         .unwrap_or_default();
-    parsed.try_into().unwrap_or_else(|_| {
-        eprintln!("{var}: '{entry}' is not {N} whole numbers separated by ':'");
-        std::process::exit(2)
-    })
+    let (last, parsed) = match parsed.len() {
+        n if n == N + 1 => (Some(parsed[N]), &parsed[..N]),
+        _ => (None, &parsed[..]),
+    };
+    match <[usize; N]>::try_from(parsed) {
+        Ok(v) => (v, last),
+        Err(_) => {
+            eprintln!(
+                "{var}: '{entry}' is not {N} or {} whole numbers separated by ':'",
+                N + 1
+            );
+            std::process::exit(2)
+        }
+    }
 }
 
 /// User + system CPU seconds of this process so far.
@@ -209,23 +220,28 @@ fn run_to_targets(m: &Measure, settings: RenderSettings) -> Outcome {
     }
 }
 
-/// A long render of another seed, with settings of its own (100 000 photons and 8
-/// final-gather rays a pass, whatever the defaults are), so that every run and every
-/// version of the engine is measured against the same kind of reference.
+/// Camera rays per pixel per pass of the references: one per final-gather ray.
+const REFERENCE_SAMPLES: u32 = 8;
+
+/// A long render of another seed, with settings of its own (100 000 photons, 8
+/// final-gather rays and 8 camera rays a pixel a pass, whatever the defaults are), so that
+/// every run and every version of the engine is measured against the same kind of
+/// reference.
 fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Image, f64) {
     let t = std::time::Instant::now();
     // PRISMAP_BENCH_CACHE=dir keeps each reference as an EXR named by its settings (to
     // explore variants without re-rendering it).
     let cached = std::env::var("PRISMAP_BENCH_CACHE").ok().map(|dir| {
         let key = format!(
-            "{}-{}x{}-{}bins-{}passes-caustic{}x{}.exr",
+            "{}-{}x{}-{}bins-{}passes-caustic{}x{}-samples{}.exr",
             scene.name,
             settings.width,
             settings.height,
             settings.bins,
             passes,
             settings.caustic_factor,
-            settings.caustic_neighbours()
+            settings.caustic_neighbours(),
+            REFERENCE_SAMPLES
         );
         std::path::Path::new(&dir).join(key)
     });
@@ -240,6 +256,7 @@ fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Ima
             seed: 99,
             photons_per_pass: 100_000,
             final_gather_rays: 8,
+            camera_samples: REFERENCE_SAMPLES,
             ..settings
         },
     )
@@ -298,20 +315,24 @@ fn main() {
         };
         let (reference, secs) = reference_image(&scene, base.clone(), reference_passes);
         let targets = [30.0, 35.0, 40.0];
-        let mut variants: Vec<(String, usize, u32)> = vec![
-            ("100 000 photons, 8 rays".into(), 100_000, 8),
-            ("50 000 photons, 4 rays".into(), 50_000, 4),
-            ("25 000 photons, 4 rays".into(), 25_000, 4),
-            ("10 000 photons, 4 rays".into(), 10_000, 4),
-            ("10 000 photons, 2 rays".into(), 10_000, 2),
+        let d = base.camera_samples as usize;
+        // Session 4's defaults, session 6's, then this build's and a few around them.
+        let mut variants: Vec<(usize, u32, usize)> = vec![
+            (100_000, 8, 1),
+            (25_000, 4, 1),
+            (25_000, 4, 2),
+            (25_000, 4, d),
+            (25_000, 8, 8),
+            (10_000, 4, 4),
         ];
-        // PRISMAP_BENCH_CORNELL="photons:rays,…" replaces the variants (to explore).
+        // PRISMAP_BENCH_CORNELL="photons:rays[:samples],…" replaces the variants (to
+        // explore; samples default to the defaults').
         if let Ok(list) = std::env::var("PRISMAP_BENCH_CORNELL") {
             variants = list
                 .split(',')
                 .map(|v| {
-                    let [p, r] = numbers::<2>("PRISMAP_BENCH_CORNELL", v);
-                    (format!("{p} photons, {r} rays"), p, r as u32)
+                    let ([p, r], samples) = numbers::<2>("PRISMAP_BENCH_CORNELL", v);
+                    (p, r as u32, samples.unwrap_or(d))
                 })
                 .collect();
         }
@@ -325,10 +346,12 @@ fn main() {
         };
         let variants = variants
             .into_iter()
-            .map(|(name, photons, rays)| {
+            .map(|(photons, rays, samples)| {
+                let name = format!("{photons} photons, {rays} rays, {samples} samples");
                 let settings = RenderSettings {
                     photons_per_pass: photons,
                     final_gather_rays: rays,
+                    camera_samples: samples as u32,
                     ..base.clone()
                 };
                 (name, settings)
@@ -362,27 +385,29 @@ fn main() {
         // reference's automatic exposure instead.
         let exposure = prismap_engine::output::auto_exposure(&reference);
         let targets = [30.0, 35.0];
-        // (bins, storage, photons, rays, caustic factor)
+        // (bins, storage, photons, rays, caustic factor, caustic k, camera samples):
+        // session 5's defaults, session 6's, then this build's and a few around them.
         let defaults = RenderSettings::default();
         let c = defaults.caustic_factor;
         let k = defaults.caustic_k;
-        let mut variants: Vec<(usize, Storage, usize, u32, usize, usize)> = vec![
-            (20, Storage::Compact, 100_000, 8, 1, k),
-            (100, Storage::Compact, 100_000, 8, 1, k),
-            (100, Storage::Compact, 25_000, 4, 1, k),
-            (100, Storage::Compact, 25_000, 4, c, k),
-            (100, Storage::Packed, 25_000, 4, c, k),
-            (40, Storage::Compact, 25_000, 4, c, k),
-            (20, Storage::Compact, 25_000, 4, c, k),
+        let d = defaults.camera_samples as usize;
+        let mut variants: Vec<(usize, Storage, usize, u32, usize, usize, usize)> = vec![
+            (100, Storage::Compact, 25_000, 4, 1, k, 1),
+            (100, Storage::Compact, 25_000, 4, c, k, 1),
+            (100, Storage::Compact, 25_000, 4, c, k, d),
+            (100, Storage::Packed, 25_000, 4, c, k, d),
+            (40, Storage::Compact, 25_000, 4, c, k, d),
+            (20, Storage::Compact, 25_000, 4, c, k, d),
+            (100, Storage::Compact, 25_000, 8, c, k, 8),
         ];
-        // PRISMAP_BENCH_PRISM="bins:photons:rays:caustic_factor:caustic_k,…" replaces the
-        // variants (compact).
+        // PRISMAP_BENCH_PRISM="bins:photons:rays:caustic_factor:caustic_k[:samples],…"
+        // replaces the variants (compact; samples default to the defaults').
         if let Ok(list) = std::env::var("PRISMAP_BENCH_PRISM") {
             variants = list
                 .split(',')
                 .map(|v| {
-                    let [b, p, r, f, k] = numbers::<5>("PRISMAP_BENCH_PRISM", v);
-                    (b, Storage::Compact, p, r as u32, f, k)
+                    let ([b, p, r, f, k], samples) = numbers::<5>("PRISMAP_BENCH_PRISM", v);
+                    (b, Storage::Compact, p, r as u32, f, k, samples.unwrap_or(d))
                 })
                 .collect();
         }
@@ -396,10 +421,10 @@ fn main() {
         };
         let variants = variants
             .into_iter()
-            .map(|(bins, storage, photons, rays, caustic_factor, caustic_k)| {
+            .map(|(bins, storage, photons, rays, caustic_factor, caustic_k, samples)| {
                 let packed = if storage == Storage::Packed { " packed" } else { "" };
                 let name = format!(
-                    "{bins} bins{packed}, {photons} photons, {rays} rays, caustic ×{caustic_factor}, k {caustic_k}"
+                    "{bins} bins{packed}, {photons} photons, {rays} rays, {samples} samples, caustic ×{caustic_factor}, k {caustic_k}"
                 );
                 let settings = RenderSettings {
                     bins,
@@ -408,6 +433,7 @@ fn main() {
                     final_gather_rays: rays,
                     caustic_factor,
                     caustic_k,
+                    camera_samples: samples as u32,
                     ..base.clone()
                 };
                 (name, settings)

@@ -805,14 +805,21 @@ fn a_square_lamp_lights_the_floor_below_by_its_form_factor() {
         (2.0 * x / s * (x / s).atan()) / (2.0 * std::f64::consts::PI)
     };
     let exact = rho * le * 4.0 * corner;
-    for fg in [1, 4] {
+    // With several camera samples a pass, each takes the next point of the light sequence.
+    for (fg, samples) in [(1, 1), (4, 1), (4, 4)] {
         for passes in [4, 32] {
-            let mean = mean_luminance(&scene, settings(Storage::Compact, 8, fg, 8, 2_000), passes);
-            println!("fg {fg}, {passes} passes: floor under the lamp {mean:.5} (exact {exact:.5})");
+            let s = RenderSettings {
+                camera_samples: samples,
+                ..settings(Storage::Compact, 8, fg, 8, 2_000)
+            };
+            let mean = mean_luminance(&scene, s, passes);
+            println!(
+                "fg {fg}, {samples} samples, {passes} passes: floor under the lamp {mean:.5} (exact {exact:.5})"
+            );
             let tolerance = if passes == 4 { 0.03 } else { 0.005 };
             assert!(
                 (mean / exact - 1.0).abs() < tolerance,
-                "fg {fg}, {passes} passes: {mean} against {exact}"
+                "fg {fg}, {samples} samples, {passes} passes: {mean} against {exact}"
             );
         }
     }
@@ -886,6 +893,29 @@ fn extra_caustic_photons_sample_the_same_caustic_and_leave_the_global_map_alone(
             "bin {b}: caustic flux {:.5} with factor 4 against {:.5} from 4× the photons ({rel:+.4})",
             t4[b],
             td[b]
+        );
+    }
+}
+
+#[test]
+fn camera_samples_share_the_final_gather_rays_without_bias() {
+    // Several camera rays a pixel a pass, the final-gather rays shared out among them and
+    // each weighing π·S/F: the furnace's L = Le / (1 − ρ) = 1 holds for every split,
+    // including more samples than rays (samples without a ray of their own see direct
+    // light only; the other samples' rays carry the pixel's indirect light). Weighing each
+    // sample's rays by its own count instead would leave the indirect half of the light
+    // out of a third of the samples at 3 samples and 2 rays (mean 0.83).
+    let scene = furnace_walls(0.5, 0.5).scene("furnace", furnace_camera());
+    for (fg, samples) in [(2, 1), (2, 3), (8, 4), (4, 8)] {
+        let s = RenderSettings {
+            camera_samples: samples,
+            ..settings(Storage::Compact, 8, fg, 16, 30_000)
+        };
+        let mean = mean_luminance(&scene, s, 4);
+        println!("fg {fg}, {samples} camera samples: mean luminance {mean:.4} (exact 1)");
+        assert!(
+            (mean - 1.0).abs() < 0.03,
+            "fg {fg}, {samples} samples: {mean}"
         );
     }
 }

@@ -150,6 +150,13 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     )
                     .on_hover_text("Final-gather rays per pixel per pass for indirect light; 0 shows the global photon map directly")
                     .changed();
+                restart |= ui
+                    .add(
+                        egui::Slider::new(&mut app.settings.camera_samples, 1..=16)
+                            .text("Camera samples"),
+                    )
+                    .on_hover_text("Camera rays per pixel per pass, spread over the pixel (--samples); the final-gather rays are shared out among them")
+                    .changed();
                 {
                     egui::ComboBox::from_label("Resolution")
                         .selected_text(format!("{}×{}", app.settings.width, app.settings.height))

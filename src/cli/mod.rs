@@ -80,6 +80,10 @@ pub struct RenderArgs {
     /// Final-gather rays per pixel per pass (0: show the global photon map directly).
     #[arg(long)]
     pub fg: Option<u32>,
+    /// Camera rays per pixel per pass, spread over the pixel; the final-gather rays are
+    /// shared out among them (edges and the light seen directly need many).
+    #[arg(long)]
+    pub samples: Option<u32>,
     /// Most single-wavelength photons one photon splits into at dispersive glass.
     #[arg(long)]
     pub split: Option<usize>,
@@ -148,6 +152,7 @@ impl RenderArgs {
             height: self.size.map_or(base.height, |s| s.1),
             seed: self.seed.unwrap_or(base.seed),
             final_gather_rays: self.fg.unwrap_or(base.final_gather_rays),
+            camera_samples: self.samples.unwrap_or(base.camera_samples),
             dispersion_split: self.split.unwrap_or(base.dispersion_split),
             caustic_factor: self.caustic_factor.unwrap_or(base.caustic_factor),
             global_k: self.global_k.unwrap_or(base.global_k),

@@ -30,6 +30,8 @@ pub struct Gather<'a> {
     /// Smallest radius a density estimate divides by (scene-scaled).
     pub r_min: f32,
     pub final_gather_rays: u32,
+    /// Camera rays per pixel per pass; the final-gather rays are shared among them.
+    pub camera_samples: u32,
     /// Safety cap on a path's specular bounces (Russian roulette ends paths first).
     pub max_bounces: u32,
 }
@@ -96,20 +98,27 @@ impl Scratch {
 pub struct GatherSequence {
     scramble: [u32; 2],
     first: u32,
+    /// Final-gather rays of this camera sample.
+    rays: u32,
     /// The direct-light sample's point on the light: an R2 sequence, one point a pass.
     light_offset: [f32; 2],
     light_index: u32,
+    /// The camera ray's point within the pixel: a Kronecker sequence of its own (see
+    /// [`pixel_jitter`]), one point a pass, same index as the light's.
+    jitter_offset: [f32; 2],
 }
 
 impl GatherSequence {
     /// `pass` counts from 0.
-    pub fn for_pixel(seed: u64, pixel: u64, pass: u64, rays: u32) -> Self {
+    pub fn for_pixel(seed: u64, pixel: u64, pass: u64, rays: u32, samples: u32) -> Self {
         let mut r = Rng::stream(seed, pass & 1, pixel, Purpose::Gather);
         Self {
             scramble: [r.next_u32(), r.next_u32()],
             first: (pass >> 1).wrapping_mul(rays as u64) as u32,
+            rays,
             light_offset: r.next_2d(),
-            light_index: (pass >> 1) as u32,
+            light_index: (pass >> 1).wrapping_mul(samples.max(1) as u64) as u32,
+            jitter_offset: r.next_2d(),
         }
     }
 }
@@ -120,7 +129,9 @@ impl Gather<'_> {
         camera_dir(&self.scene.camera, x, y, width, height)
     }
 
-    /// Radiance (N bins) arriving at the camera through pixel (px, py), one jittered sample.
+    /// Radiance (N bins) arriving at the camera through pixel (px, py): the mean of
+    /// `camera_samples` rays through points of the pixel's own low-discrepancy sequence
+    /// ([`pixel_jitter`]), continued from pass to pass.
     pub fn pixel(
         &self,
         (px, py): (u32, u32),
@@ -131,9 +142,24 @@ impl Gather<'_> {
         out: &mut [f32],
     ) {
         out.fill(0.0);
-        let [jx, jy] = rng.next_2d();
-        let dir = self.camera_dir(px as f32 + jx, py as f32 + jy, width, height);
-        self.radiance(self.scene.camera.position, dir, rng, fg, s, out);
+        let samples = self.camera_samples.max(1);
+        let mut first = fg.first;
+        for k in 0..samples {
+            let rays = fg.rays / samples + u32::from(k < fg.rays % samples);
+            let sample = GatherSequence {
+                first,
+                rays,
+                light_index: fg.light_index.wrapping_add(k),
+                ..fg
+            };
+            first = first.wrapping_add(rays);
+            let [jx, jy] = pixel_jitter(sample.light_index, fg.jitter_offset);
+            let dir = self.camera_dir(px as f32 + jx, py as f32 + jy, width, height);
+            self.radiance(self.scene.camera.position, dir, rng, sample, s, out);
+        }
+        if samples > 1 {
+            spd::scale(out, 1.0 / samples as f32);
+        }
     }
 
     /// Radiance along a camera ray, added to `out`.
@@ -298,19 +324,22 @@ impl Gather<'_> {
             spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
         }
         // Indirect light: final gather. Cosine sampling makes each ray's weight ρ, i.e.
-        // irradiance π·mean(L), so it joins the other irradiance terms.
-        s.fg.fill(0.0);
-        for j in 0..self.final_gather_rays {
-            let u = sobol02(fg.first.wrapping_add(j), fg.scramble);
-            let dir = cosine_hemisphere(nf, u);
-            self.final_gather_ray(self.scene.accel.offset(p, nf, dir), dir, rng, &mut s.ray);
-            spd::add_scaled(&mut s.fg, &s.ray.out, 1.0);
+        // irradiance π·mean(L), so it joins the other irradiance terms. The pixel's rays
+        // are shared out among its camera samples (`fg.rays` of them here) and every ray
+        // weighs the same, π·S/F (the pixel divides by S), so that any split — a sample
+        // with no ray among them — estimates the pixel's indirect light without bias.
+        if fg.rays > 0 {
+            s.fg.fill(0.0);
+            for j in 0..fg.rays {
+                let u = sobol02(fg.first.wrapping_add(j), fg.scramble);
+                let dir = cosine_hemisphere(nf, u);
+                self.final_gather_ray(self.scene.accel.offset(p, nf, dir), dir, rng, &mut s.ray);
+                spd::add_scaled(&mut s.fg, &s.ray.out, 1.0);
+            }
+            let samples = self.camera_samples.max(1) as f32;
+            let weight = std::f32::consts::PI * samples / self.final_gather_rays as f32;
+            spd::add_scaled(&mut s.acc, &s.fg, weight);
         }
-        spd::add_scaled(
-            &mut s.acc,
-            &s.fg,
-            std::f32::consts::PI / self.final_gather_rays as f32,
-        );
         spd::mul_assign(&mut s.acc, reflectance);
         spd::scale(&mut s.acc, inv_pi);
     }
@@ -492,4 +521,84 @@ fn pick_bin(t: &[f32], u: f32) -> Option<usize> {
         }
     }
     last
+}
+
+/// Point `i` of a 2-D Kronecker sequence rotated by `offset`, for the camera ray's
+/// position within its pixel. Its steps are the third and fourth of Roberts' R4 sequence
+/// (powers of 1/φ₄, φ₄ the real root of x⁵ = x + 1), not R2's: the light sample follows R2
+/// at the same index, and two R2 copies would be the same lattice shifted, so the
+/// sub-pixel position and the point on the light would move in lock step.
+#[inline]
+fn pixel_jitter(i: u32, offset: [f32; 2]) -> [f32; 2] {
+    const A: [f64; 2] = [0.628_706_721_037_808_6, 0.538_597_257_223_610_1];
+    let f = |a: f64, o: f32| {
+        let v = ((o as f64 + i as f64 * a).fract()) as f32;
+        if v < 1.0 { v } else { 0.0 }
+    };
+    [f(A[0], offset[0]), f(A[1], offset[1])]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points `start..start + n` of the pixel sequence at `offset`.
+    fn run(start: u32, n: u32, offset: [f32; 2]) -> Vec<[f32; 2]> {
+        (start..start + n)
+            .map(|i| pixel_jitter(i, offset))
+            .collect()
+    }
+
+    #[test]
+    fn any_run_of_pixel_points_covers_the_pixel_evenly() {
+        // A pixel's camera rays over 64 consecutive samples, any offset, any start: every
+        // box [0, a) × [0, b) on a 16 × 16 grid holds 64·a·b points to within 7 (64
+        // independent uniform points stray by up to 15 over the same boxes and trials).
+        let mut rng = Rng::stream(7, 0, 0, Purpose::Camera);
+        for _ in 0..16 {
+            let offset = rng.next_2d();
+            let points = run(rng.next_u32() % 100_000, 64, offset);
+            assert!(points.iter().flatten().all(|v| (0.0..1.0).contains(v)));
+            for a in (1..=16).map(|i| i as f32 / 16.0) {
+                for b in (1..=16).map(|i| i as f32 / 16.0) {
+                    let n = points.iter().filter(|p| p[0] < a && p[1] < b).count() as f32;
+                    assert!(
+                        (n - 64.0 * a * b).abs() <= 7.0,
+                        "box {a} × {b}: {n} points, offset {offset:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_point_in_the_pixel_does_not_follow_the_point_on_the_light() {
+        // Both run at the same index with independent offsets. Two copies of R2 would be
+        // one lattice shifted: a pixel coordinate against the light's same coordinate
+        // would lie on a few lines (x' = x + c mod 1), leaving most of the unit square
+        // empty. The pixel's own steps fill it: over 256 points every cell of a 4 × 4 grid
+        // of (pixel coordinate, light coordinate) holds at least 8 (16 expected).
+        let cells = |pairs: &mut dyn Iterator<Item = (f32, f32)>| {
+            let mut c = [0u32; 16];
+            for (x, y) in pairs {
+                c[(x * 4.0) as usize * 4 + (y * 4.0) as usize] += 1;
+            }
+            c
+        };
+        let mut rng = Rng::stream(8, 0, 0, Purpose::Camera);
+        for _ in 0..16 {
+            let (o_pixel, o_light) = (rng.next_2d(), rng.next_2d());
+            for a in 0..2 {
+                for b in 0..2 {
+                    let c = cells(
+                        &mut (0..256).map(|i| (pixel_jitter(i, o_pixel)[a], r2(i, o_light)[b])),
+                    );
+                    assert!(c.iter().all(|&n| n >= 8), "dims {a}, {b}: {c:?}");
+                }
+                // The check can tell: a second R2 copy leaves cells empty.
+                let c = cells(&mut (0..256).map(|i| (r2(i, o_pixel)[a], r2(i, o_light)[a])));
+                assert!(c.contains(&0), "dim {a}: {c:?}");
+            }
+        }
+    }
 }

@@ -336,6 +336,7 @@ impl RenderSession {
             caustic_kernel,
             r_min,
             final_gather_rays: self.settings.final_gather_rays,
+            camera_samples: self.settings.camera_samples,
             max_bounces: self.settings.max_bounces,
         };
         let (image, probe_spectra, all_spectra) = self.gather_image(&gather, pass)?;
@@ -476,7 +477,13 @@ impl RenderSession {
                         .map(|x| {
                             let index = (y as u64) * w as u64 + x as u64;
                             let mut rng = Rng::stream(seed, pass, index, Purpose::Camera);
-                            let fg = GatherSequence::for_pixel(seed, index, pass - 1, rays);
+                            let fg = GatherSequence::for_pixel(
+                                seed,
+                                index,
+                                pass - 1,
+                                rays,
+                                gather.camera_samples,
+                            );
                             gather.pixel((x, y), (w, h), &mut rng, fg, scratch, radiance);
                             if let Some(k) = probes.iter().position(|p| (p.x, p.y) == (x, y)) {
                                 spectra.push((k, radiance.clone()));

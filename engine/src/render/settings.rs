@@ -19,6 +19,12 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Final-gather rays per pixel per pass; 0 shows the global map directly.
     pub final_gather_rays: u32,
+    /// Camera rays per pixel per pass (`--samples`), spread over the pixel; the
+    /// final-gather rays are shared out among them. Edges, the light seen directly and
+    /// direct shadows need many positions within a pixel, and a camera ray costs less
+    /// than the final-gather rays it carries.
+    #[serde(default = "default_camera_samples")]
+    pub camera_samples: u32,
     /// Safety cap on the bounces of any path, photon or camera. Paths end by Russian
     /// roulette on the reflectance (unbiased); the cap only stops paths that lose no energy
     /// (light trapped by total internal reflection, lossless mirrors). At the default 1024
@@ -80,6 +86,7 @@ impl Default for RenderSettings {
             height: 256,
             seed: 1,
             final_gather_rays: 4,
+            camera_samples: DEFAULT_CAMERA_SAMPLES,
             max_bounces: DEFAULT_MAX_BOUNCES,
             alpha: 2.0 / 3.0,
             global_radius: None,
@@ -127,6 +134,15 @@ pub const MAX_CAUSTIC_FACTOR: usize = 256;
 
 fn default_caustic_factor() -> usize {
     DEFAULT_CAUSTIC_FACTOR
+}
+
+/// Default camera rays per pixel per pass (the speed bench, issue #12).
+pub const DEFAULT_CAMERA_SAMPLES: u32 = 4;
+/// Most camera rays per pixel per pass.
+pub const MAX_CAMERA_SAMPLES: u32 = 256;
+
+fn default_camera_samples() -> u32 {
+    DEFAULT_CAMERA_SAMPLES
 }
 
 /// Default safety cap on path bounces (see [`RenderSettings::max_bounces`]).
@@ -195,13 +211,14 @@ impl RenderSettings {
     }
 
     /// The quick first image after a change, derived from these settings: a quarter of
-    /// the resolution, a tenth of the photons, no final gathering.
+    /// the resolution, a tenth of the photons, no final gathering, one camera ray a pixel.
     pub fn quick_preview_of(&self) -> Self {
         Self {
             width: self.width.div_ceil(4),
             height: self.height.div_ceil(4),
             photons_per_pass: (self.photons_per_pass / 10).max(1000),
             final_gather_rays: 0,
+            camera_samples: 1,
             ..self.clone()
         }
     }
@@ -239,6 +256,11 @@ impl RenderSettings {
         if self.final_gather_rays > 1024 {
             let reason = "final-gather rays must be at most 1024";
             return Err(out_of_range("--fg", self.final_gather_rays, reason));
+        }
+        if self.camera_samples == 0 || self.camera_samples > MAX_CAMERA_SAMPLES {
+            let reason =
+                format!("camera rays per pixel must be between 1 and {MAX_CAMERA_SAMPLES}");
+            return Err(out_of_range("--samples", self.camera_samples, reason));
         }
         if self.max_bounces == 0 || self.max_bounces > MAX_BOUNCES {
             let reason = format!("the bounce cap must be between 1 and {MAX_BOUNCES}");
@@ -459,6 +481,14 @@ mod tests {
         };
         let msg = bad.validate().unwrap_err().to_string();
         assert!(msg.starts_with("--caustic-factor 0:"), "{msg}");
+        for samples in [0, MAX_CAMERA_SAMPLES + 1] {
+            let bad = RenderSettings {
+                camera_samples: samples,
+                ..RenderSettings::default()
+            };
+            let msg = bad.validate().unwrap_err().to_string();
+            assert!(msg.starts_with(&format!("--samples {samples}:")), "{msg}");
+        }
         let bad = RenderSettings {
             photons_per_pass: MAX_PHOTONS_PER_PASS,
             caustic_factor: 8,
