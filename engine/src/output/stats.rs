@@ -16,6 +16,9 @@ pub struct Stats {
     pub seed: u64,
     pub photons_per_pass: usize,
     pub final_gather_rays: u32,
+    /// Camera rays a pixel a pass (absent from stats written before session 7: 1).
+    #[serde(default = "one")]
+    pub camera_samples: u32,
     pub photons: PhotonStats,
     pub memory_bytes: MemoryStats,
     pub bytes_per_photon: f64,
@@ -86,6 +89,7 @@ impl Stats {
             seed: s.seed,
             photons_per_pass: s.photons_per_pass,
             final_gather_rays: s.final_gather_rays,
+            camera_samples: s.camera_samples,
             photons: PhotonStats {
                 emitted: st.photons_emitted,
                 caustic_emitted: st.caustic_photons_emitted,
@@ -141,6 +145,10 @@ impl Stats {
     pub fn render_seconds(&self) -> f64 {
         self.seconds.photon_pass + self.seconds.gather_pass
     }
+}
+
+fn one() -> u32 {
+    1
 }
 
 #[cfg(test)]
