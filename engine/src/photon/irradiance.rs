@@ -77,7 +77,7 @@ fn cell_key(p: Vec3, n: Vec3, inv_cell: f32) -> CellKey {
 /// A multiply–rotate hash for cell keys (the keys are small integers: SipHash's
 /// protection against chosen keys buys nothing here and costs a lookup's worth of time).
 #[derive(Default)]
-struct CellHasher(u64);
+pub(super) struct CellHasher(u64);
 
 impl std::hash::Hasher for CellHasher {
     fn finish(&self) -> u64 {

@@ -3,7 +3,10 @@
 
 use glam::Vec3;
 
+use std::sync::OnceLock;
+
 use super::kdtree;
+use super::occupancy::Occupancy;
 use super::record::{
     PhotonHeader, Record, decode_spike, encode_spike, oct_from_16, oct_to_16, pack_record,
     unpack_record,
@@ -263,6 +266,9 @@ pub struct PhotonMap {
     packed: Vec<u32>,
     axes: Vec<u8>,
     spikes: usize,
+    /// Which cubes hold photons, built by the first density estimate for its search cap
+    /// (each map is read with one kernel a pass): empty neighbourhoods skip the search.
+    occupancy: OnceLock<Occupancy>,
 }
 
 impl PhotonMap {
@@ -297,7 +303,20 @@ impl PhotonMap {
             packed,
             axes,
             spikes: batch.spikes,
+            occupancy: OnceLock::new(),
         }
+    }
+
+    /// Whether a photon may lie within `r` of `p` (false only when none does), by the
+    /// occupancy grid built for `r_max` on first use.
+    fn may_hold_within(&self, p: Vec3, r: f32, r_max: f32) -> bool {
+        if !(r_max > 0.0 && r_max.is_finite()) {
+            return true;
+        }
+        let grid = self
+            .occupancy
+            .get_or_init(|| Occupancy::build(&self.positions, r_max));
+        grid.may_hold_within(p, r)
     }
 
     pub fn record(&self) -> Record {
@@ -441,6 +460,13 @@ impl PhotonMap {
         if kernel.k == 0 {
             let r = kernel.r_max * kernel.shrink;
             found.clear();
+            if !self.may_hold_within(p, r, kernel.r_max) {
+                self.sum_flux(grid, std::iter::empty(), out);
+                return Estimate {
+                    r,
+                    r_k: kernel.r_max,
+                };
+            }
             kdtree::for_each_within(&self.positions, &self.axes, p, r * r, |i, d2| {
                 if accept(i) {
                     found.push((d2, i as u32));
@@ -457,6 +483,17 @@ impl PhotonMap {
         // and a selection); the rest run one bounded k-nearest search out to r_max.
         let r = kernel.r_start.clamp(f32::MIN_POSITIVE, kernel.r_max);
         found.clear();
+        // Nothing within the cap: what the range search below would conclude, without it
+        // (the same radii, bit for bit).
+        if r >= kernel.r_max && !self.may_hold_within(p, r, kernel.r_max) {
+            let r2_k = r * r;
+            let r2 = r2_k * kernel.shrink * kernel.shrink;
+            self.sum_flux(grid, std::iter::empty(), out);
+            return Estimate {
+                r: r2.sqrt(),
+                r_k: r2_k.sqrt(),
+            };
+        }
         kdtree::for_each_within(&self.positions, &self.axes, p, r * r, |i, d2| {
             if accept(i) {
                 found.push((d2, i as u32));

@@ -4,6 +4,7 @@
 pub mod irradiance;
 pub mod kdtree;
 pub mod map;
+pub mod occupancy;
 pub mod record;
 pub mod trace;
 

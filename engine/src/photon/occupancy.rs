@@ -1,0 +1,116 @@
+//! Which cubes of a coarse grid hold photons: a density estimate whose search sphere
+//! touches only empty cubes has no photon to find, and is answered without a tree search.
+//! On the prism, 86 % of the caustic map's estimates (one per camera sample that reaches a
+//! diffuse surface) lie where no caustic photon is within the search cap, and an empty kd
+//! range search at the cap cost about 600 ns; a hash probe of at most 8 cubes does not.
+
+use std::collections::HashSet;
+use std::hash::BuildHasherDefault;
+
+use glam::Vec3;
+
+use super::irradiance::CellHasher;
+
+type Cube = (i32, i32, i32);
+
+#[derive(Clone, Debug)]
+pub struct Occupancy {
+    /// The cubes' side: twice the largest radius the grid answers for, so that a sphere
+    /// of that radius overlaps at most 2 cubes along each axis.
+    side: f32,
+    inv_side: f32,
+    cubes: HashSet<Cube, BuildHasherDefault<CellHasher>>,
+}
+
+fn cube_of(v: f32) -> i32 {
+    // NaN casts to 0: a non-finite query gets a (conservative) probe, not a panic.
+    v.floor().clamp(-1e9, 1e9) as i32
+}
+
+impl Occupancy {
+    /// The grid of `positions` that answers for search radii up to `r_max` (> 0).
+    pub fn build(positions: &[[f32; 3]], r_max: f32) -> Self {
+        let side = 2.0 * r_max;
+        let inv_side = 1.0 / side;
+        let cubes = positions
+            .iter()
+            .map(|p| {
+                let q = |v: f32| cube_of(v * inv_side);
+                (q(p[0]), q(p[1]), q(p[2]))
+            })
+            .collect();
+        Self {
+            side,
+            inv_side,
+            cubes,
+        }
+    }
+
+    /// Whether a photon may lie within `r` of `p`: false only when none does (exact in
+    /// that direction: a "may" is settled by the search). Radii above the grid's own are
+    /// always a "may".
+    pub fn may_hold_within(&self, p: Vec3, r: f32) -> bool {
+        if !(2.0 * r <= self.side) {
+            return true;
+        }
+        // Padded past f32 rounding of p ± r, so that a photon on the sphere's edge is
+        // never in a cube left out.
+        let r = r * (1.0 + 1e-4) + 1e-6 * p.abs().max_element();
+        let lo = ((p - Vec3::splat(r)) * self.inv_side)
+            .to_array()
+            .map(cube_of);
+        let hi = ((p + Vec3::splat(r)) * self.inv_side)
+            .to_array()
+            .map(cube_of);
+        (lo[0]..=hi[0]).any(|x| {
+            (lo[1]..=hi[1]).any(|y| (lo[2]..=hi[2]).any(|z| self.cubes.contains(&(x, y, z))))
+        })
+    }
+
+    /// Bytes of the cube set (its table's capacity).
+    pub fn memory_bytes(&self) -> usize {
+        self.cubes.capacity() * (size_of::<Cube>() + 1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::{Purpose, Rng};
+
+    #[test]
+    fn an_empty_answer_is_never_wrong_and_far_queries_get_one() {
+        // Photons in two clumps; queries everywhere at radii up to the grid's: whenever a
+        // photon lies within r of the query, the grid must say "may" (brute force).
+        let mut rng = Rng::stream(11, 0, 0, Purpose::Photon);
+        let mut positions = Vec::new();
+        for c in [Vec3::new(0.2, 0.0, 0.3), Vec3::new(-0.5, 0.4, -0.1)] {
+            for _ in 0..500 {
+                let [a, b] = rng.next_2d();
+                let d = Vec3::new(a - 0.5, b - 0.5, rng.next_f32() - 0.5) * 0.1;
+                positions.push((c + d).to_array());
+            }
+        }
+        let r_max = 0.02;
+        let grid = Occupancy::build(&positions, r_max);
+        let (mut empty, mut wrong) = (0, 0);
+        for _ in 0..20_000 {
+            let [a, b] = rng.next_2d();
+            let p = Vec3::new(a * 2.0 - 1.0, b * 2.0 - 1.0, rng.next_f32() * 2.0 - 1.0);
+            let r = r_max * rng.next_f32();
+            let near = positions
+                .iter()
+                .any(|q| Vec3::from_array(*q).distance_squared(p) <= r * r);
+            let may = grid.may_hold_within(p, r);
+            wrong += (near && !may) as u32;
+            empty += !may as u32;
+        }
+        assert_eq!(wrong, 0);
+        // Most of the cube [-1, 1]³ is far from both clumps.
+        assert!(empty > 18_000, "{empty}");
+        // Larger radii than the grid's, and NaN, are a "may".
+        assert!(grid.may_hold_within(Vec3::splat(5.0), 3.0 * r_max));
+        let _ = grid.may_hold_within(Vec3::splat(f32::NAN), r_max);
+        assert!(grid.memory_bytes() > 0);
+    }
+}
