@@ -2,11 +2,19 @@
 //! reordered so that every subrange `[lo, hi)` has its splitting photon at the middle,
 //! with one byte recording the split axis. Splitting by count (median index), never by
 //! value, keeps the depth at ⌈log₂ n⌉ even for a million coincident photons.
+//!
+//! Subranges of at most [`LEAF`] photons are not split further: a query scans them in
+//! order (contiguous memory, no branch per level), which costs fewer visits than the last
+//! three levels of single-photon nodes would.
 
 use glam::Vec3;
 
 /// Subranges shorter than this are built on the current thread.
 const PARALLEL_CUTOFF: usize = 1 << 14;
+
+/// Subranges of at most this many photons are leaves, scanned in full by a query (their
+/// axis bytes are unused).
+pub const LEAF: usize = 16;
 
 /// Computes the kd order: returns (permutation, axis per position in the new order).
 pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
@@ -33,7 +41,7 @@ pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
 /// at the parent's split: no rescan of the points per node).
 fn build(items: &mut [([f32; 3], u32)], axes: &mut [u8], bounds: ([f32; 3], [f32; 3])) {
     let n = items.len();
-    if n <= 1 {
+    if n <= LEAF {
         return;
     }
     let (lo, hi) = bounds;
@@ -80,17 +88,19 @@ pub fn for_each_within(
     mut f: impl FnMut(usize, f32),
 ) {
     let p = p.to_array();
+    let dist2 = |q: [f32; 3]| {
+        let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+        (d, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    };
     let mut stack = [(0usize, 0usize); 64];
     let mut sp = 0;
     let (mut lo, mut hi) = (0usize, positions.len());
     loop {
-        if lo < hi {
+        if hi - lo > LEAF {
             let mid = (lo + hi) / 2;
-            let q = positions[mid];
-            let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-            let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-            if dist2 <= r2 {
-                f(mid, dist2);
+            let (d, d2) = dist2(positions[mid]);
+            if d2 <= r2 {
+                f(mid, d2);
             }
             let delta = d[axes[mid] as usize];
             // Visit the near side now, keep the far side if the sphere crosses the plane.
@@ -99,17 +109,24 @@ pub fn for_each_within(
             } else {
                 ((mid + 1, hi), (lo, mid))
             };
-            if delta * delta <= r2 && far.0 < far.1 && sp < stack.len() {
+            if delta * delta <= r2 && sp < stack.len() {
                 stack[sp] = far;
                 sp += 1;
             }
             (lo, hi) = near;
-        } else if sp > 0 {
-            sp -= 1;
-            (lo, hi) = stack[sp];
-        } else {
+            continue;
+        }
+        for (i, q) in positions[lo..hi].iter().enumerate() {
+            let (_, d2) = dist2(*q);
+            if d2 <= r2 {
+                f(lo + i, d2);
+            }
+        }
+        if sp == 0 {
             break;
         }
+        sp -= 1;
+        (lo, hi) = stack[sp];
     }
 }
 
@@ -133,44 +150,58 @@ pub fn k_nearest_within(
     }
     let p = p.to_array();
     let mut r2 = r2_max;
+    let mut offer = |i: usize, d2: f32, r2: &mut f32| {
+        if d2 < *r2 && accept(i) {
+            if found.len() < k {
+                heap_push(found, (d2, i as u32));
+            } else {
+                heap_replace_top(found, (d2, i as u32));
+            }
+            if found.len() == k {
+                *r2 = found[0].0;
+            }
+        }
+    };
+    let dist2 = |q: [f32; 3]| {
+        let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+        (d, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    };
     let mut stack = [(0usize, 0usize, 0f32); 64];
     let mut sp = 0;
     let (mut lo, mut hi) = (0usize, positions.len());
     loop {
-        if lo < hi {
+        if hi - lo > LEAF {
             let mid = (lo + hi) / 2;
-            let q = positions[mid];
-            let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-            let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-            if dist2 < r2 && accept(mid) {
-                if found.len() < k {
-                    heap_push(found, (dist2, mid as u32));
-                } else {
-                    heap_replace_top(found, (dist2, mid as u32));
-                }
-                if found.len() == k {
-                    r2 = found[0].0;
-                }
-            }
+            let (d, d2) = dist2(positions[mid]);
+            offer(mid, d2, &mut r2);
             let delta = d[axes[mid] as usize];
             let (near, far) = if delta <= 0.0 {
                 ((lo, mid), (mid + 1, hi))
             } else {
                 ((mid + 1, hi), (lo, mid))
             };
-            if delta * delta < r2 && far.0 < far.1 && sp < stack.len() {
+            if delta * delta < r2 && sp < stack.len() {
                 stack[sp] = (far.0, far.1, delta * delta);
                 sp += 1;
             }
             (lo, hi) = near;
-        } else if sp > 0 {
+            continue;
+        }
+        for (i, q) in positions[lo..hi].iter().enumerate() {
+            let (_, d2) = dist2(*q);
+            offer(lo + i, d2, &mut r2);
+        }
+        // The next kept side the radius still reaches (it may have shrunk since).
+        (lo, hi) = (0, 0);
+        while sp > 0 {
             sp -= 1;
             let (a, b, plane2) = stack[sp];
-            // The radius may have shrunk since this side was kept.
             if plane2 < r2 {
                 (lo, hi) = (a, b);
+                break;
             }
-        } else {
+        }
+        if hi == 0 {
             break;
         }
     }
@@ -263,23 +294,31 @@ fn kth_rec(
     heap: &mut std::collections::BinaryHeap<OrdF32>,
     r2: &mut f32,
 ) {
-    if lo >= hi {
+    let dist2 = |q: [f32; 3]| {
+        let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+        (d, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    };
+    let mut offer = |d2: f32, heap: &mut std::collections::BinaryHeap<OrdF32>| {
+        if heap.len() < k {
+            heap.push(OrdF32(d2));
+            if heap.len() == k {
+                *r2 = heap.peek().map(|v| v.0).unwrap_or(f32::INFINITY);
+            }
+        } else if d2 < *r2 {
+            heap.pop();
+            heap.push(OrdF32(d2));
+            *r2 = heap.peek().map(|v| v.0).unwrap_or(f32::INFINITY);
+        }
+    };
+    if hi - lo <= LEAF {
+        for q in &pos[lo..hi] {
+            offer(dist2(*q).1, heap);
+        }
         return;
     }
     let mid = (lo + hi) / 2;
-    let q = pos[mid];
-    let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-    let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-    if heap.len() < k {
-        heap.push(OrdF32(dist2));
-        if heap.len() == k {
-            *r2 = heap.peek().map(|v| v.0).unwrap_or(f32::INFINITY);
-        }
-    } else if dist2 < *r2 {
-        heap.pop();
-        heap.push(OrdF32(dist2));
-        *r2 = heap.peek().map(|v| v.0).unwrap_or(f32::INFINITY);
-    }
+    let (d, d2) = dist2(pos[mid]);
+    offer(d2, heap);
     let delta = d[axes[mid] as usize];
     let (near, far) = if delta <= 0.0 {
         ((lo, mid), (mid + 1, hi))
@@ -351,6 +390,50 @@ mod tests {
             assert_eq!(got, want, "trial {trial}");
             let expect_r2 = if want.len() == k { want[k - 1] } else { r2_max };
             assert_eq!(r2, expect_r2);
+        }
+    }
+
+    #[test]
+    fn every_size_around_the_leaf_size_answers_as_brute_force_does() {
+        let mut rng = Rng::stream(7, 0, 0, Purpose::Photon);
+        let mut found = Vec::new();
+        for n in 0..(4 * LEAF + 3) {
+            let pts: Vec<[f32; 3]> = (0..n)
+                .map(|_| [rng.next_f32(), rng.next_f32(), rng.next_f32()])
+                .collect();
+            let (sorted, axes) = ordered(&pts);
+            for _ in 0..20 {
+                let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                let r2 = 0.1 * rng.next_f32();
+                let mut seen = Vec::new();
+                for_each_within(&sorted, &axes, p, r2, |i, d2| {
+                    assert_eq!(d2, (Vec3::from_array(sorted[i]) - p).length_squared());
+                    seen.push(i)
+                });
+                seen.sort();
+                seen.dedup();
+                assert_eq!(seen.len(), brute(&pts, p, r2), "{n} points");
+                let k = 1 + n / 3;
+                k_nearest_within(&sorted, &axes, p, k, 1.0, |_| true, &mut found);
+                let mut got: Vec<f32> = found.iter().map(|f| f.0).collect();
+                got.sort_by(f32::total_cmp);
+                let mut want: Vec<f32> = pts
+                    .iter()
+                    .map(|q| (Vec3::from_array(*q) - p).length_squared())
+                    .filter(|&d2| d2 < 1.0)
+                    .collect();
+                want.sort_by(f32::total_cmp);
+                want.truncate(k);
+                assert_eq!(got, want, "{n} points, k {k}");
+                let kth = kth_nearest_distance(&sorted, &axes, p, k);
+                let mut all: Vec<f32> = pts
+                    .iter()
+                    .map(|q| (Vec3::from_array(*q) - p).length_squared())
+                    .collect();
+                all.sort_by(f32::total_cmp);
+                let want_kth = all.get(k.min(n).wrapping_sub(1)).map_or(0.0, |d| d.sqrt());
+                assert_eq!(kth, want_kth, "{n} points, k {k}");
+            }
         }
     }
 
