@@ -5,7 +5,7 @@
 //!
 //! Subranges of at most [`LEAF`] photons are not split further: a query scans them in
 //! order (contiguous memory, no branch per level), which costs fewer visits than the last
-//! three levels of single-photon nodes would.
+//! four levels of single-photon nodes would.
 
 use glam::Vec3;
 
@@ -15,6 +15,16 @@ const PARALLEL_CUTOFF: usize = 1 << 14;
 /// Subranges of at most this many photons are leaves, scanned in full by a query (their
 /// axis bytes are unused).
 pub const LEAF: usize = 16;
+// A split range holds more than LEAF ≥ 2 photons, so both halves beside its median are
+// non-empty: the searches push a far side without checking it.
+const _: () = assert!(LEAF >= 2);
+
+/// The offset from `q` to `p` and its squared length, the one distance every search uses.
+#[inline(always)]
+fn offset_dist2(p: [f32; 3], q: [f32; 3]) -> ([f32; 3], f32) {
+    let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    (d, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+}
 
 /// Computes the kd order: returns (permutation, axis per position in the new order).
 pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
@@ -88,10 +98,7 @@ pub fn for_each_within(
     mut f: impl FnMut(usize, f32),
 ) {
     let p = p.to_array();
-    let dist2 = |q: [f32; 3]| {
-        let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-        (d, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    };
+    let dist2 = |q: [f32; 3]| offset_dist2(p, q);
     let mut stack = [(0usize, 0usize); 64];
     let mut sp = 0;
     let (mut lo, mut hi) = (0usize, positions.len());
@@ -162,10 +169,7 @@ pub fn k_nearest_within(
             }
         }
     };
-    let dist2 = |q: [f32; 3]| {
-        let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-        (d, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    };
+    let dist2 = |q: [f32; 3]| offset_dist2(p, q);
     let mut stack = [(0usize, 0usize, 0f32); 64];
     let mut sp = 0;
     let (mut lo, mut hi) = (0usize, positions.len());
@@ -192,17 +196,17 @@ pub fn k_nearest_within(
             offer(lo + i, d2, &mut r2);
         }
         // The next kept side the radius still reaches (it may have shrunk since).
-        (lo, hi) = (0, 0);
-        while sp > 0 {
+        let mut next = None;
+        while sp > 0 && next.is_none() {
             sp -= 1;
             let (a, b, plane2) = stack[sp];
             if plane2 < r2 {
-                (lo, hi) = (a, b);
-                break;
+                next = Some((a, b));
             }
         }
-        if hi == 0 {
-            break;
+        match next {
+            Some(range) => (lo, hi) = range,
+            None => break,
         }
     }
     r2
@@ -294,10 +298,7 @@ fn kth_rec(
     heap: &mut std::collections::BinaryHeap<OrdF32>,
     r2: &mut f32,
 ) {
-    let dist2 = |q: [f32; 3]| {
-        let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-        (d, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    };
+    let dist2 = |q: [f32; 3]| offset_dist2(p, q);
     let mut offer = |d2: f32, heap: &mut std::collections::BinaryHeap<OrdF32>| {
         if heap.len() < k {
             heap.push(OrdF32(d2));
