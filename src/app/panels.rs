@@ -481,6 +481,10 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         row("global map", format_bytes(m.global_map as f64));
                         row("caustic map", format_bytes(m.caustic_map as f64));
                         row("photon maps", format_bytes(m.photon_maps as f64));
+                        if m.next_pass_maps > 0 {
+                            // Traced during this pass's gather, for the next pass.
+                            row("next pass's maps", format_bytes(m.next_pass_maps as f64));
+                        }
                         row("bytes per photon", format!("{:.1}", s.bytes_per_photon));
                         row("film (+ probes)", format_bytes(m.film as f64));
                         row("BVH", format_bytes(m.bvh as f64));

@@ -68,8 +68,14 @@ pub struct RadiusStats {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SecondsStats {
+    /// Waiting for photon maps before a gather (each pass but the first traces the next
+    /// one's photons during its gather, so this is mostly the first pass's tracing).
     pub photon_pass: f64,
+    /// Gathering, with the next pass's tracing where it ran alongside.
     pub gather_pass: f64,
+    /// Of `gather_pass`, the wall time of the tracing that ran alongside.
+    #[serde(default)]
+    pub photon_alongside: f64,
     pub total: f64,
 }
 
@@ -118,6 +124,7 @@ impl Stats {
             seconds: SecondsStats {
                 photon_pass: st.photon_seconds,
                 gather_pass: st.gather_seconds,
+                photon_alongside: st.photon_seconds_alongside,
                 total: total_seconds,
             },
             nonfinite_pixels: image

@@ -95,7 +95,9 @@ pub struct ErrorReference<'a> {
 
 impl RenderSession {
     /// Renders passes until `stop` or until `observer` returns [`Flow::Stop`]; returns the
-    /// per-pass log. A size mismatch with the reference is an error before any pass.
+    /// per-pass log. Each pass but the last traces the next one's photons alongside its
+    /// gather (the same maps that pass would trace itself; see [`RenderSession::run_pass`]).
+    /// A size mismatch with the reference is an error before any pass.
     pub fn run(
         &mut self,
         stop: Stop,
@@ -113,8 +115,16 @@ impl RenderSession {
         }
         let started = Instant::now();
         let mut log = Vec::new();
-        for _ in 0..stop.passes.unwrap_or(u64::MAX) {
-            self.run_pass()?;
+        let passes = stop.passes.unwrap_or(u64::MAX);
+        for i in 0..passes {
+            // The next pass's photons are traced during this pass's gather when another
+            // pass is expected: not after the last of a pass count, nor when the time
+            // limit will likely have passed (the observer may still stop the run, and then
+            // those maps go unused).
+            let expected =
+                |s: f64| started.elapsed().as_secs_f64() + self.stats().last_pass_seconds < s;
+            let trace_next = i + 1 < passes && stop.seconds.is_none_or(expected);
+            self.pass(trace_next)?;
             let st = self.stats();
             let record = PassRecord {
                 pass: st.passes,
@@ -192,6 +202,66 @@ mod tests {
             .run(Stop::seconds(1e-9), None, &mut |_, _| Flow::Continue)
             .unwrap();
         assert_eq!(log.len(), 1);
+    }
+
+    /// Bit patterns of an image, to compare renders exactly.
+    fn bits(image: &Image) -> Vec<[u32; 3]> {
+        image.pixels.iter().map(|p| p.map(f32::to_bits)).collect()
+    }
+
+    #[test]
+    fn tracing_the_next_pass_alongside_a_gather_changes_nothing() {
+        // A run traces each next pass's photons during the gather before it; passes run
+        // one by one trace their own. Same images and photons, bit for bit: with an ample
+        // budget; with one that holds one pass's maps but not two (nothing is traced
+        // ahead); and with one so tight that photons per pass are lowered.
+        let scene = scene::load_builtin("prism").unwrap();
+        let settings = |budget| RenderSettings {
+            width: 24,
+            height: 16,
+            photons_per_pass: 20_000,
+            photon_budget_bytes: budget,
+            ..RenderSettings::default()
+        };
+        let mut one_pass = RenderSession::new(&scene, settings(None)).unwrap();
+        one_pass.run_pass().unwrap();
+        let maps = one_pass.memory().photon_maps;
+        for budget in [None, Some(maps * 3 / 2), Some(maps / 10)] {
+            let mut ahead = RenderSession::new(&scene, settings(budget)).unwrap();
+            let mut alongside = Vec::new();
+            let log = ahead
+                .run(Stop::passes(4), None, &mut |s, _| {
+                    let m = s.memory();
+                    if let Some(b) = budget {
+                        let both = m.photon_maps + m.next_pass_maps;
+                        assert!(both <= b, "{both} bytes of maps > budget {b}");
+                    }
+                    alongside.push(m.next_pass_maps);
+                    Flow::Continue
+                })
+                .unwrap();
+            assert_eq!(log.len(), 4);
+            let mut alone = RenderSession::new(&scene, settings(budget)).unwrap();
+            for _ in 0..4 {
+                alone.run_pass().unwrap();
+            }
+            assert_eq!(bits(&ahead.image()), bits(&alone.image()), "{budget:?}");
+            let (a, b) = (ahead.stats(), alone.stats());
+            assert_eq!(
+                (a.photons_emitted, a.stored_caustic_total, &a.budget_note),
+                (b.photons_emitted, b.stored_caustic_total, &b.budget_note)
+            );
+            assert_eq!(a.budget_note.is_some(), budget == Some(maps / 10));
+            assert_eq!(b.photon_seconds_alongside, 0.0);
+            // The last pass traces nothing ahead; the others do when two passes' maps fit.
+            let room = budget.is_none();
+            assert_eq!(alongside[3], 0);
+            assert!(
+                alongside[..3].iter().all(|&m| (m > 0) == room),
+                "{alongside:?}"
+            );
+            assert_eq!(a.photon_seconds_alongside > 0.0, room);
+        }
     }
 
     #[test]

@@ -4,8 +4,9 @@
 //! **Consistency** (documented scheme): probabilistic progressive photon mapping (Knaus
 //! & Zwicker 2011). Pass k uses radius r_k with r²ₖ₊₁ = r²ₖ·(k+α)/(k+1), so the bias of
 //! each pass vanishes while the variance of the mean over passes still goes to zero: the
-//! image converges to the right answer as passes grow. Only one pass's photon maps live
-//! in memory at a time.
+//! image converges to the right answer as passes grow. At most two passes' photon maps
+//! live in memory at a time: the gathering pass's, and the next pass's while they are
+//! traced alongside that gather (both within the photon budget).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -44,6 +45,37 @@ pub enum RenderError {
 /// spectrum when a spectral film is kept.
 type PassImage = (Vec<[f32; 3]>, Vec<(usize, Vec<f32>)>, Vec<f32>);
 
+/// The first pass's typical radii of the global and caustic maps, once measured (or set).
+type FirstRadii = (Option<f32>, Option<f32>);
+
+/// A pass's photon maps and what is derived from them before it gathers.
+struct Prepared {
+    maps: PhotonPass,
+    /// Photons emitted (fewer than asked when the budget required).
+    photons: usize,
+    budget_note: Option<String>,
+    /// The first-pass radii, once measured.
+    r1: FirstRadii,
+    kernels: (Kernel, Kernel),
+    /// This pass's typical (median k-nearest) radii.
+    typical: (f32, f32),
+    irradiance: Option<IrradianceCache>,
+    /// Wall seconds the tracing and preparing took.
+    seconds: f64,
+}
+
+impl Prepared {
+    /// Bytes of the photon maps.
+    fn map_bytes(&self) -> usize {
+        self.maps.global.memory_bytes() + self.maps.caustic.as_ref().map_or(0, |c| c.memory_bytes())
+    }
+
+    /// Photon-map bytes per emitted photon (what the budget scales by).
+    fn bytes_per_emitted(&self) -> f64 {
+        self.map_bytes() as f64 / self.photons.max(1) as f64
+    }
+}
+
 /// Bytes of each part of a render, measured exactly.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct MemoryReport {
@@ -52,6 +84,9 @@ pub struct MemoryReport {
     pub photon_maps: usize,
     /// The global map's precomputed irradiance (final gathering only).
     pub irradiance_cache: usize,
+    /// The next pass's photon maps, traced while this pass gathered and alive beside its
+    /// maps until that pass starts (0 when none were); the two fit the photon budget.
+    pub next_pass_maps: usize,
     pub film: usize,
     pub bvh: usize,
 }
@@ -72,8 +107,15 @@ pub struct RenderStats {
     pub stored_caustic_total: u64,
     pub spike_records_total: u64,
     pub dispersion_splits: u64,
+    /// Wall seconds spent waiting for photon maps before a gather: a pass whose maps were
+    /// traced during the previous pass's gather (see [`RenderSession::run`]) waits none.
     pub photon_seconds: f64,
+    /// Wall seconds of gathering, including the next pass's photon tracing where it ran
+    /// alongside; `photon_seconds + gather_seconds` is the render's wall time.
     pub gather_seconds: f64,
+    /// Of `gather_seconds`, the wall seconds the next pass's tracing took alongside (the
+    /// two shared the cores).
+    pub photon_seconds_alongside: f64,
     pub last_pass_seconds: f64,
     /// Typical (median k-nearest) gather radii of the latest pass; each query adapts its
     /// own radius to its k nearest photons.
@@ -104,6 +146,8 @@ pub struct RenderSession {
     bytes_per_emitted: Option<f64>,
     /// This pass's typical (median k-nearest) radii of the global and caustic maps.
     typical: (f32, f32),
+    /// The next pass's maps, traced during the latest pass's gather.
+    next: Option<Prepared>,
     /// Pixels whose centre sees an emitter directly (for exposure metering), once known.
     emitter_pixels: std::sync::OnceLock<Arc<Vec<bool>>>,
     /// The denoiser's guides (first hits through pixel centres), once asked for.
@@ -185,6 +229,7 @@ impl RenderSession {
             spectra: None,
             bytes_per_emitted: None,
             typical: (0.0, 0.0),
+            next: None,
             emitter_pixels: std::sync::OnceLock::new(),
             guides: std::sync::OnceLock::new(),
         }
@@ -305,77 +350,129 @@ impl RenderSession {
     /// Runs one pass; on cancel (or when not even one photon fits the budget) the film is
     /// unchanged.
     pub fn run_pass(&mut self) -> Result<(), RenderError> {
+        self.pass(false)
+    }
+
+    /// Runs one pass; with `trace_next`, the next pass's photons are traced (and its
+    /// irradiance cache built) on the same threads while this pass gathers, so that
+    /// neither phase's serial parts (kd-tree tops, the cache's thinning, the last rows)
+    /// leave a core idle. The next pass then starts from those maps: they are the ones it
+    /// would have traced itself (same seed, pass and photon count), so the images do not
+    /// change. Only [`RenderSession::run`] asks for it, when another pass is expected.
+    pub(super) fn pass(&mut self, trace_next: bool) -> Result<(), RenderError> {
         if INJECT_PANIC.load(Ordering::Relaxed) {
             panic!("injected fault (test)");
         }
         let start = Instant::now();
         let pass = self.film.passes() + 1;
-        let (maps, photons) = self.trace_within_budget(pass)?;
+        let (prepared, overlapped) = match self.next.take() {
+            Some(p) => {
+                let seconds = p.seconds;
+                (p, seconds)
+            }
+            None => {
+                let (maps, photons, note) = self.trace_within_budget(pass)?;
+                let r1 = (self.r1_global, self.r1_caustic);
+                let p = self.prepare(maps, photons, note, r1, self.radius_sq_factor, start);
+                (p, 0.0)
+            }
+        };
         let photon_done = Instant::now();
-        let (global_kernel, caustic_kernel) = self.kernels(&maps);
-        let (r_global, r_caustic) = self.typical;
-        let r_min = 1e-6 * self.scene.diagonal().max(1e-6);
-        // Final-gather rays read precomputed irradiance (one density estimate per
-        // `PRECOMPUTE_EVERY` photons instead of one per ray).
-        let irradiance = (self.settings.final_gather_rays > 0).then(|| {
-            IrradianceCache::build(
-                &maps.global,
-                &self.scene.grid,
-                global_kernel,
-                PRECOMPUTE_EVERY,
-                r_min,
-                global_kernel.r_max,
-            )
-        });
+        (self.r1_global, self.r1_caustic) = prepared.r1;
+        self.typical = prepared.typical;
+        let (global_kernel, caustic_kernel) = prepared.kernels;
         let gather = Gather {
             scene: &self.scene,
-            global: &maps.global,
-            caustic: maps.caustic.as_ref(),
-            irradiance: irradiance.as_ref(),
+            global: &prepared.maps.global,
+            caustic: prepared.maps.caustic.as_ref(),
+            irradiance: prepared.irradiance.as_ref(),
             global_kernel,
             caustic_kernel,
-            r_min,
+            r_min: self.r_min(),
             final_gather_rays: self.settings.final_gather_rays,
             camera_samples: self.settings.camera_samples,
             max_bounces: self.settings.max_bounces,
         };
-        let (image, probe_spectra, all_spectra) = self.gather_image(&gather, pass)?;
+        let next_factor = next_radius_sq_factor(self.radius_sq_factor, pass, self.settings.alpha);
+        let (gathered, next) = if trace_next {
+            let this = &*self;
+            rayon::join(
+                || this.gather_image(&gather, pass),
+                || this.trace_ahead(pass + 1, &prepared, next_factor),
+            )
+        } else {
+            (self.gather_image(&gather, pass), None)
+        };
+        let (image, probe_spectra, all_spectra) = gathered?;
         self.film.add_pass(&image);
         self.add_probe_spectra(probe_spectra);
         if let Some(s) = &mut self.spectra {
             s.add_pass(&all_spectra);
         }
         let times = (start, photon_done, Instant::now());
-        self.record_pass(&maps, photons, (r_global, r_caustic), times);
-        self.memory.irradiance_cache = irradiance.as_ref().map_or(0, |c| c.memory_bytes());
-        self.radius_sq_factor =
-            next_radius_sq_factor(self.radius_sq_factor, pass, self.settings.alpha);
+        self.record_pass(&prepared, overlapped, times);
+        self.memory.next_pass_maps = next.as_ref().map_or(0, Prepared::map_bytes);
+        self.next = next;
+        self.radius_sq_factor = next_factor;
         Ok(())
+    }
+
+    /// The smallest radius a density estimate divides by.
+    fn r_min(&self) -> f32 {
+        1e-6 * self.scene.diagonal().max(1e-6)
+    }
+
+    /// The photon budget in bytes (the settings', or the machine's default).
+    fn budget(&self) -> usize {
+        self.settings
+            .photon_budget_bytes
+            .unwrap_or_else(default_photon_budget)
+    }
+
+    /// Photons a pass first tries to emit: the settings', lowered to what the budget holds
+    /// at the latest pass's bytes per emitted photon.
+    fn photons_to_try(&self, bytes_per_emitted: Option<f64>) -> usize {
+        let (asked, budget) = (self.settings.photons_per_pass, self.budget());
+        match bytes_per_emitted {
+            Some(b) if b > 0.0 => asked.min((budget as f64 / (1.1 * b)) as usize).max(1),
+            _ => asked,
+        }
+    }
+
+    fn photon_settings(&self, photons: usize, max_map_bytes: usize) -> PhotonSettings {
+        PhotonSettings {
+            photons,
+            record: self.settings.storage.record(),
+            max_bounces: self.settings.max_bounces,
+            dispersion_split: self.settings.dispersion_split,
+            caustic_map: true,
+            caustic_factor: self.settings.caustic_factor,
+            max_map_bytes,
+        }
+    }
+
+    /// Why photons per pass are below the settings', if they are.
+    fn budget_note(&self, photons: usize) -> Option<String> {
+        let asked = self.settings.photons_per_pass;
+        (photons < asked).then(|| {
+            format!(
+                "photons per pass lowered from {asked} to {photons}: the photon maps must fit the budget of {:.1} MB",
+                self.budget() as f64 / 1e6
+            )
+        })
     }
 
     /// Traces pass `pass`'s photons, lowering photons per pass to fit the photon-map
     /// budget: first from the previous pass's bytes per emitted photon, then by halving if
-    /// a pass still overruns. Returns the maps and the photons emitted.
-    fn trace_within_budget(&mut self, pass: u64) -> Result<(PhotonPass, usize), RenderError> {
-        let budget = self
-            .settings
-            .photon_budget_bytes
-            .unwrap_or_else(default_photon_budget);
-        let asked = self.settings.photons_per_pass;
-        let mut photons = match self.bytes_per_emitted {
-            Some(b) if b > 0.0 => asked.min((budget as f64 / (1.1 * b)) as usize).max(1),
-            _ => asked,
-        };
+    /// a pass still overruns. Returns the maps, the photons emitted and the budget's note.
+    fn trace_within_budget(
+        &self,
+        pass: u64,
+    ) -> Result<(PhotonPass, usize, Option<String>), RenderError> {
+        let budget = self.budget();
+        let mut photons = self.photons_to_try(self.bytes_per_emitted);
         let maps = loop {
-            let photon_settings = PhotonSettings {
-                photons,
-                record: self.settings.storage.record(),
-                max_bounces: self.settings.max_bounces,
-                dispersion_split: self.settings.dispersion_split,
-                caustic_map: true,
-                caustic_factor: self.settings.caustic_factor,
-                max_map_bytes: budget,
-            };
+            let photon_settings = self.photon_settings(photons, budget);
             let seed = self.settings.seed;
             match trace_photons(&self.scene, &photon_settings, seed, pass, &self.cancel) {
                 Ok(m) => break m,
@@ -384,43 +481,117 @@ impl RenderSession {
                 Err(TraceStop::OverBudget) => return Err(RenderError::OverBudget { budget }),
             }
         };
-        self.stats.budget_note = (photons < asked).then(|| {
-            format!(
-                "photons per pass lowered from {asked} to {photons}: the photon maps must fit the budget of {:.1} MB",
-                budget as f64 / 1e6
-            )
-        });
-        Ok((maps, photons))
+        Ok((maps, photons, self.budget_note(photons)))
     }
 
-    /// This pass's density-estimate kernels. Each map's radius adapts per query to its
+    /// Pass `pass`'s maps traced ahead, while `current` (the pass before it) gathers:
+    /// exactly what [`Self::trace_within_budget`] would trace first after `current`, in
+    /// the budget `current` leaves. None when that does not fit (the pass then traces
+    /// for itself, halving as usual) or on cancel.
+    fn trace_ahead(
+        &self,
+        pass: u64,
+        current: &Prepared,
+        radius_sq_factor: f64,
+    ) -> Option<Prepared> {
+        let start = Instant::now();
+        let bytes_per_emitted = current.bytes_per_emitted();
+        let photons = self.photons_to_try(Some(bytes_per_emitted));
+        let left = self.budget().saturating_sub(current.map_bytes());
+        if photons as f64 * bytes_per_emitted > left as f64 {
+            return None; // would not fit beside this pass's maps: not worth trying
+        }
+        let settings = self.photon_settings(photons, left);
+        let maps = trace_photons(
+            &self.scene,
+            &settings,
+            self.settings.seed,
+            pass,
+            &self.cancel,
+        );
+        let note = self.budget_note(photons);
+        Some(self.prepare(
+            maps.ok()?,
+            photons,
+            note,
+            current.r1,
+            radius_sq_factor,
+            start,
+        ))
+    }
+
+    /// What a pass derives from its photon maps before gathering: the first-pass radii
+    /// (measured once), the kernels at this pass's shrink, and the irradiance cache that
+    /// final-gather rays read.
+    fn prepare(
+        &self,
+        maps: PhotonPass,
+        photons: usize,
+        budget_note: Option<String>,
+        r1: FirstRadii,
+        radius_sq_factor: f64,
+        start: Instant,
+    ) -> Prepared {
+        let (r1, kernels, typical) = self.kernels(&maps, r1, radius_sq_factor);
+        // Final-gather rays read precomputed irradiance (one density estimate per
+        // `PRECOMPUTE_EVERY` photons instead of one per ray).
+        let irradiance = (self.settings.final_gather_rays > 0).then(|| {
+            IrradianceCache::build(
+                &maps.global,
+                &self.scene.grid,
+                kernels.0,
+                PRECOMPUTE_EVERY,
+                self.r_min(),
+                kernels.0.r_max,
+            )
+        });
+        Prepared {
+            maps,
+            photons,
+            budget_note,
+            r1,
+            kernels,
+            typical,
+            irradiance,
+            seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+
+    /// A pass's density-estimate kernels. Each map's radius adapts per query to its
     /// k nearest photons (`global_k`, [`RenderSettings::caustic_neighbours`]), searched out to a cap, and shrinks
     /// with passes by the Knaus–Zwicker factor; a radius given in the settings is used as
     /// a fixed radius instead. The first pass also measures the median k-nearest distance
-    /// over the photons (`typical`), which sets the caps and is reported.
-    fn kernels(&mut self, maps: &PhotonPass) -> (Kernel, Kernel) {
+    /// over the photons (`typical`), which sets the caps and is reported. Returns the
+    /// first-pass radii (`r1` with any still unknown measured on these maps), the kernels
+    /// and this pass's typical radii.
+    fn kernels(
+        &self,
+        maps: &PhotonPass,
+        (mut r1_global, mut r1_caustic): FirstRadii,
+        radius_sq_factor: f64,
+    ) -> (FirstRadii, (Kernel, Kernel), (f32, f32)) {
         let scene = &self.scene;
         let fallback = || {
             let area = scene.diffuse_area.max(1e-12);
             let stored = maps.global.len().max(1) as f64;
             ((area * self.settings.global_k as f64) / (std::f64::consts::PI * stored)).sqrt() as f32
         };
-        if self.r1_global.is_none() {
-            self.r1_global = Some(
+        if r1_global.is_none() {
+            r1_global = Some(
                 maps.global
                     .typical_knn_radius(self.settings.global_k, 256)
                     .unwrap_or_else(fallback),
             );
         }
-        if self.r1_caustic.is_none()
+        if r1_caustic.is_none()
             && let Some(c) = &maps.caustic
         {
-            self.r1_caustic = c.typical_knn_radius(self.settings.caustic_neighbours(), 256);
+            r1_caustic = c.typical_knn_radius(self.settings.caustic_neighbours(), 256);
         }
         let diag = scene.diagonal().max(1e-6);
-        let shrink = self.radius_sq_factor.sqrt() as f32;
-        let typical_global = self.r1_global.unwrap_or_else(fallback);
-        let typical_caustic = self.r1_caustic.unwrap_or(typical_global);
+        let shrink = radius_sq_factor.sqrt() as f32;
+        let typical_global = r1_global.unwrap_or_else(fallback);
+        let typical_caustic = r1_caustic.unwrap_or(typical_global);
         let kernel = |fixed: Option<f32>, k: usize, typical: f32, cap: f32| match fixed {
             Some(r) => Kernel {
                 k: 0,
@@ -450,8 +621,8 @@ impl RenderSession {
             typical_caustic,
             CAUSTIC_CAP_TYPICAL * typical_caustic,
         );
-        self.typical = (typical_global * shrink, typical_caustic * shrink);
-        (global, caustic)
+        let typical = (typical_global * shrink, typical_caustic * shrink);
+        ((r1_global, r1_caustic), (global, caustic), typical)
     }
 
     /// One sample per pixel, rows in parallel; returns the pass image (linear sRGB) and the
@@ -526,14 +697,15 @@ impl RenderSession {
     /// Bookkeeping after a pass: counts, times, radii, memory.
     fn record_pass(
         &mut self,
-        maps: &PhotonPass,
-        photons: usize,
-        (r_global, r_caustic): (f32, f32),
+        prepared: &Prepared,
+        overlapped: f64,
         (start, photon_done, end): (Instant, Instant, Instant),
     ) {
+        let maps = &prepared.maps;
         let st = &mut self.stats;
         st.passes = self.film.passes();
-        st.photons_last_pass = photons as u64;
+        st.photons_last_pass = prepared.photons as u64;
+        st.budget_note = prepared.budget_note.clone();
         st.photons_emitted += maps.emitted;
         st.caustic_photons_emitted += maps.caustic_emitted;
         st.stored_global = maps.global.len() as u64;
@@ -549,7 +721,9 @@ impl RenderSession {
         st.dispersion_splits += maps.splits;
         st.photon_seconds += (photon_done - start).as_secs_f64();
         st.gather_seconds += (end - photon_done).as_secs_f64();
+        st.photon_seconds_alongside += overlapped;
         st.last_pass_seconds = (end - start).as_secs_f64();
+        let (r_global, r_caustic) = prepared.typical;
         st.r_global = r_global;
         st.r_caustic = if maps.caustic.is_some() {
             r_caustic
@@ -559,7 +733,8 @@ impl RenderSession {
         self.memory.global_map = maps.global.memory_bytes();
         self.memory.caustic_map = maps.caustic.as_ref().map_or(0, |c| c.memory_bytes());
         self.memory.photon_maps = self.memory.global_map + self.memory.caustic_map;
-        self.bytes_per_emitted = Some(self.memory.photon_maps as f64 / photons.max(1) as f64);
+        self.memory.irradiance_cache = prepared.irradiance.as_ref().map_or(0, |c| c.memory_bytes());
+        self.bytes_per_emitted = Some(prepared.bytes_per_emitted());
     }
 
     /// Which pixels see an emitter directly through their centre (one ray each, cast once):
