@@ -19,7 +19,8 @@
 //! `PRISMAP_BENCH_SCENE` (`cornell-box` or `prism`: one scene only), `PRISMAP_BENCH_CACHE`
 //! (a folder to keep the references in between runs) and
 //! `PRISMAP_BENCH_CORNELL` = `photons:rays[:samples],…` / `PRISMAP_BENCH_PRISM` =
-//! `bins:photons:rays:caustic_factor:caustic_k[:samples],…` (other variants). The references take the default
+//! `bins:photons:rays:caustic_factor:caustic_k[:samples],…` (other variants), `PRISMAP_BENCH_SPLIT` (the prism variants'
+//! dispersion split). The references take the default
 //! caustic factor.
 
 use prismap_engine::metrics::psnr;
@@ -419,12 +420,17 @@ fn main() {
             targets: &targets,
             max_seconds,
         };
+        // PRISMAP_BENCH_SPLIT=S sets every variant's dispersion split (`--split`).
+        let split: Option<usize> = std::env::var("PRISMAP_BENCH_SPLIT")
+            .ok()
+            .map(|v| v.parse().expect("PRISMAP_BENCH_SPLIT: a whole number"));
         let variants = variants
             .into_iter()
             .map(|(bins, storage, photons, rays, caustic_factor, caustic_k, samples)| {
                 let packed = if storage == Storage::Packed { " packed" } else { "" };
+                let split_note = split.map_or(String::new(), |s| format!(", split {s}"));
                 let name = format!(
-                    "{bins} bins{packed}, {photons} photons, {rays} rays, {samples} samples, caustic ×{caustic_factor}, k {caustic_k}"
+                    "{bins} bins{packed}, {photons} photons, {rays} rays, {samples} samples, caustic ×{caustic_factor}, k {caustic_k}{split_note}"
                 );
                 let settings = RenderSettings {
                     bins,
@@ -434,6 +440,7 @@ fn main() {
                     caustic_factor,
                     caustic_k,
                     camera_samples: samples as u32,
+                    dispersion_split: split.unwrap_or(base.dispersion_split),
                     ..base.clone()
                 };
                 (name, settings)
