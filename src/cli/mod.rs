@@ -110,8 +110,9 @@ pub struct RenderArgs {
     /// First-pass gather radius of the caustic map, in scene units (default: estimated).
     #[arg(long, allow_negative_numbers = true)]
     pub caustic_radius: Option<f32>,
-    /// Most megabytes one pass's photon maps may take (default: a quarter of RAM);
-    /// photons per pass are lowered to fit.
+    /// Most megabytes the photon maps may take (default: a quarter of RAM): one pass's,
+    /// plus the next pass's while they are traced during its gather (only when both fit);
+    /// photons per pass are lowered until one pass's fit.
     #[arg(long, allow_negative_numbers = true)]
     pub photon_budget: Option<f64>,
     /// Exposure multiplier for the PNG (default: automatic, from the image; EXR is always

@@ -56,6 +56,10 @@ pub struct MemoryStats {
     pub caustic_map: usize,
     pub photon_maps: usize,
     pub irradiance_cache: usize,
+    /// The next pass's photon maps, when a run stopped after they were traced alongside
+    /// its last gather (0 otherwise).
+    #[serde(default)]
+    pub next_pass_maps: usize,
     pub film: usize,
     pub bvh: usize,
 }
@@ -112,6 +116,7 @@ impl Stats {
                 caustic_map: mem.caustic_map,
                 photon_maps: mem.photon_maps,
                 irradiance_cache: mem.irradiance_cache,
+                next_pass_maps: mem.next_pass_maps,
                 film: mem.film,
                 bvh: mem.bvh,
             },

@@ -53,8 +53,9 @@ pub struct RenderSettings {
     /// misses the glass. Ignored where the scene has no mirror or glass.
     #[serde(default = "default_caustic_factor")]
     pub caustic_factor: usize,
-    /// Most bytes one pass's photon maps may take; None: a quarter of the machine's RAM.
-    /// Photons per pass are lowered to fit (and the stats say so).
+    /// Most bytes the photon maps may take; None: a quarter of the machine's RAM. Photons
+    /// per pass are lowered until one pass's maps fit (and the stats say so); the next
+    /// pass's are traced during a gather only when both passes' maps fit together.
     pub photon_budget_bytes: Option<usize>,
     /// How the scene's RGB colours become spectra (`--spectra`).
     #[serde(default)]
