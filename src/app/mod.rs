@@ -20,8 +20,7 @@ use std::time::Instant;
 
 use crate::photon::Storage;
 use crate::render::{Image, RenderSettings};
-use crate::scene::{self, MaterialKind, Scene};
-use crate::spectral::Spectrum;
+use crate::scene::{self, Scene};
 use orbit::Orbit;
 use worker::{Command, Snapshot, Worker};
 
@@ -243,10 +242,10 @@ impl ViewerApp {
     }
 
     /// Marks the bin count as the scene's automatic choice (it already is: the caller set
-    /// it from [`auto_bins`]), so the panel shows "auto" with its reason and a new scene
+    /// it from [`Scene::auto_bins`]), so the panel shows "auto" with its reason and a new scene
     /// picks its own.
     pub fn keep_auto_bins(&mut self) {
-        let (bins, why) = auto_bins(&self.scene);
+        let (bins, why) = self.scene.auto_bins();
         if bins != self.settings.bins {
             self.settings.bins = bins;
             self.auto_bins = true;
@@ -259,7 +258,7 @@ impl ViewerApp {
     /// Restarts rendering with the current scene, camera and settings.
     pub fn restart(&mut self) {
         if self.auto_bins {
-            let (bins, why) = auto_bins(&self.scene);
+            let (bins, why) = self.scene.auto_bins();
             self.settings.bins = bins;
             self.auto_reason = why;
         }
@@ -809,27 +808,6 @@ impl eframe::App for ViewerApp {
 /// Display bytes (RGB8, sRGB-encoded) of a linear image.
 pub fn tone_map(image: &Image, exposure: f32, tone: ToneMap) -> Vec<u8> {
     crate::output::to_display8(image, exposure, tone)
-}
-
-/// The bin count the viewer picks on "auto", and why.
-pub fn auto_bins(scene: &Scene) -> (usize, String) {
-    let dispersive = scene
-        .materials
-        .iter()
-        .any(|m| matches!(&m.kind, MaterialKind::Dielectric { ior, .. } if ior.is_dispersive()));
-    let spectral_light = scene
-        .materials
-        .iter()
-        .filter_map(|m| m.emission.as_ref())
-        .chain(scene.lights.iter().map(|l| &l.intensity))
-        .any(|s| !matches!(s, Spectrum::Illuminant(_)));
-    if dispersive {
-        (100, "100 bins: dispersive glass splits light into single wavelengths; fine bins give a smooth rainbow, and compact storage keeps those photons lossless at any N".to_string())
-    } else if spectral_light {
-        (20, "20 bins: a spectral light (blackbody or measured) without dispersion; 20 bins resolve its shape".to_string())
-    } else {
-        (8, "8 bins: only RGB inputs and no dispersion, so spectral and RGB agree at any N (the paper's Cornell box); 8 bins suffice".to_string())
-    }
 }
 
 /// The `.gltf`/`.glb` files in a folder and its subfolders one level down (fixtures,

@@ -32,6 +32,12 @@ pub fn render(args: RenderArgs) -> Result<()> {
     let exposure = args.exposure.map(validate_exposure).transpose()?;
     let stop = Stop::from_flags(args.passes, args.seconds)?;
     let mut settings = args.settings()?;
+    if args.bins.is_none() && args.preset.is_none() {
+        // The bins the scene needs, as the viewer picks them.
+        let (bins, why) = scene.auto_bins();
+        settings.bins = bins;
+        eprintln!("{}: {why} (--bins sets them)", scene.name);
+    }
     if args.size.is_none() {
         // The camera's shape (a 16:9 Blender camera renders 16:9).
         (settings.width, settings.height) = scene.image_size(settings.height);
@@ -145,7 +151,7 @@ pub fn view(args: ViewArgs) -> Result<()> {
     let (width, height) = args.size.unwrap_or_else(|| loaded.image_size(256));
     let auto_bins = args.bins.is_none();
     let settings = RenderSettings {
-        bins: args.bins.unwrap_or_else(|| app::auto_bins(&loaded).0),
+        bins: args.bins.unwrap_or_else(|| loaded.auto_bins().0),
         storage: args.storage,
         spectra: args.spectra,
         photons_per_pass: args.photons,

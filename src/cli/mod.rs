@@ -47,7 +47,9 @@ pub struct RenderArgs {
     /// flags override it.
     #[arg(long)]
     pub preset: Option<String>,
-    /// Wavelength bins (1–4096; ignored by --storage rgb).
+    /// Wavelength bins, 1–4096 (default: chosen for the scene, as the viewer's "auto" — 100
+    /// with dispersive glass, 20 with a spectral light, else 8 — or the preset's with
+    /// --preset; ignored by --storage rgb).
     #[arg(long)]
     pub bins: Option<usize>,
     /// Photon storage: full (N floats), compact (RGB triplet or spike), packed (compact in

@@ -161,6 +161,30 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// The bin count this scene needs, and why (the viewer's "auto" and `render`'s default):
+    /// 100 with dispersive glass (single-wavelength photons: fine bins make a smooth
+    /// rainbow, and compact storage keeps them lossless at any N), 20 with a spectral
+    /// light and no dispersion (enough to resolve its shape), else 8 (RGB inputs only:
+    /// spectral and RGB agree at any N).
+    pub fn auto_bins(&self) -> (usize, String) {
+        let dispersive = self.materials.iter().any(
+            |m| matches!(&m.kind, MaterialKind::Dielectric { ior, .. } if ior.is_dispersive()),
+        );
+        let spectral_light = self
+            .materials
+            .iter()
+            .filter_map(|m| m.emission.as_ref())
+            .chain(self.lights.iter().map(|l| &l.intensity))
+            .any(|s| !matches!(s, Spectrum::Illuminant(_)));
+        if dispersive {
+            (100, "100 bins: dispersive glass splits light into single wavelengths; fine bins give a smooth rainbow, and compact storage keeps those photons lossless at any N".to_string())
+        } else if spectral_light {
+            (20, "20 bins: a spectral light (blackbody or measured) without dispersion; 20 bins resolve its shape".to_string())
+        } else {
+            (8, "8 bins: only RGB inputs and no dispersion, so spectral and RGB agree at any N (the paper's Cornell box); 8 bins suffice".to_string())
+        }
+    }
+
     /// An image size for this scene's camera: `height` rows and the camera's aspect ratio
     /// (square when the camera does not say).
     pub fn image_size(&self, height: u32) -> (u32, u32) {
