@@ -5,7 +5,11 @@ use std::sync::atomic::AtomicBool;
 
 use divan::{Bencher, black_box, counter::ItemsCount};
 use glam::Vec3;
-use prismap_engine::photon::{PhotonSettings, Storage, trace_photons};
+use prismap_engine::photon::record::oct_decode;
+use prismap_engine::photon::{
+    IrradianceCache, Kernel, PhotonMap, PhotonSettings, Storage, trace_photons,
+};
+use prismap_engine::render::session::PRECOMPUTE_EVERY;
 use prismap_engine::sampling::{Purpose, Rng, uniform_sphere};
 use prismap_engine::scene::{SpectralScene, load_builtin};
 use prismap_engine::spectral::{BinGrid, Role, Spectrum, spd};
@@ -68,9 +72,9 @@ fn photons_traced_textured(bencher: Bencher, textured: bool) {
     );
 }
 
-/// Radius queries on the global map (one thread), full vs compact at 20 bins.
-#[divan::bench(args = [Storage::Full, Storage::Compact], sample_count = 10)]
-fn gather_queries(bencher: Bencher, storage: Storage) {
+/// A global map of the Cornell box (100 000 photons, 20 bins) and 2 000 of its photons'
+/// positions and surface normals to query at, with the median 48-nearest radius.
+fn gather_setup(storage: Storage) -> (SpectralScene, PhotonMap, Vec<(Vec3, Vec3)>, f32) {
     let scene = cornell(20);
     let settings = PhotonSettings {
         photons: 100_000,
@@ -85,23 +89,86 @@ fn gather_queries(bencher: Bencher, storage: Storage) {
         .unwrap()
         .global;
     let r = map.typical_knn_radius(48, 256).unwrap();
-    let points: Vec<[f32; 3]> = map
-        .positions()
-        .iter()
+    // Each query on a photon's own surface (its stored normal), as the gather's are.
+    let points = (0..map.len())
         .step_by(97)
         .take(2000)
-        .copied()
+        .map(|i| {
+            let n = oct_decode(map.normal_code(i));
+            (Vec3::from_array(map.positions()[i]), n)
+        })
         .collect();
+    (scene, map, points, r)
+}
+
+/// Fixed-radius queries on the global map (one thread), full vs compact at 20 bins.
+#[divan::bench(args = [Storage::Full, Storage::Compact], sample_count = 10)]
+fn gather_queries(bencher: Bencher, storage: Storage) {
+    let (scene, map, points, r) = gather_setup(storage);
     let mut out = vec![0.0f32; 20];
     bencher
         .counter(ItemsCount::new(points.len()))
         .bench_local(|| {
             let mut n = 0;
-            for p in &points {
+            for &(p, normal) in &points {
                 out.fill(0.0);
-                n += map.gather(&scene.grid, Vec3::from_array(*p), Vec3::Y, r, &mut out);
+                n += map.gather(&scene.grid, p, normal, r, &mut out);
             }
             n
+        });
+}
+
+/// The renderer's own estimate (one thread): the 48 nearest photons on the query's
+/// surface, searched from the typical radius out to twice it, full vs compact at 20 bins.
+#[divan::bench(args = [Storage::Full, Storage::Compact], sample_count = 10)]
+fn gather_knn_estimates(bencher: Bencher, storage: Storage) {
+    let (scene, map, points, r) = gather_setup(storage);
+    let kernel = Kernel {
+        k: 48,
+        r_max: 2.0 * r,
+        r_start: r,
+        shrink: 1.0,
+    };
+    let mut out = vec![0.0f32; 20];
+    let mut found = Vec::new();
+    bencher
+        .counter(ItemsCount::new(points.len()))
+        .bench_local(|| {
+            let mut radii = 0.0;
+            for &(p, normal) in &points {
+                out.fill(0.0);
+                radii += map
+                    .estimate(&scene.grid, p, normal, kernel, &mut found, &mut out)
+                    .r;
+            }
+            radii
+        });
+}
+
+/// What a final-gather ray reads (one thread): the irradiance precomputed at every
+/// `PRECOMPUTE_EVERY`-th photon, looked up at the nearest point on the query's surface,
+/// full vs compact at 20 bins. Built with the renderer's own kernel (48 nearest, out to
+/// twice the typical radius).
+#[divan::bench(args = [Storage::Full, Storage::Compact], sample_count = 10)]
+fn irradiance_lookups(bencher: Bencher, storage: Storage) {
+    let (scene, map, points, r) = gather_setup(storage);
+    let kernel = Kernel {
+        k: 48,
+        r_max: 2.0 * r,
+        r_start: r,
+        shrink: 1.0,
+    };
+    let cache = IrradianceCache::build(&map, &scene.grid, kernel, PRECOMPUTE_EVERY, 1e-6, 2.0 * r);
+    let mut out = vec![0.0f32; 20];
+    let mut found = Vec::new();
+    bencher
+        .counter(ItemsCount::new(points.len()))
+        .bench_local(|| {
+            let mut hits = 0;
+            for &(p, normal) in &points {
+                hits += usize::from(cache.lookup(&scene.grid, p, normal, &mut found, &mut out));
+            }
+            hits
         });
 }
 

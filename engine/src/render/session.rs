@@ -164,7 +164,7 @@ const GLOBAL_CAP_DIAGONAL: f32 = 0.02;
 /// share those passes' noise), spot-lit stage 29.20 vs 29.36 dB at 24 passes (a reference
 /// of another seed) — and each pass is cheaper, so per second every
 /// 16th is as good or better (spot-lit stage: 29.20 dB at 5.8 s, every 8th ≈ 29.1 dB).
-const PRECOMPUTE_EVERY: usize = 16;
+pub const PRECOMPUTE_EVERY: usize = 16;
 /// The caustic map's search cap, in typical radii: the radius shrinks where caustic
 /// photons are dense (a sharper caustic) but does not widen beyond its start, so a query
 /// far from every caustic costs one small search.
