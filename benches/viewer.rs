@@ -1,6 +1,6 @@
 //! Viewer responsiveness while rendering (issue #3): run with
 //! `cargo bench --bench viewer` (PRISMAP_BENCH_SECONDS sets the length, default 30;
-//! PRISMAP_BENCH_PHOTONS, _FG, _SAMPLES, _CAUSTIC_FACTOR and _BINS the render settings).
+//! PRISMAP_BENCH_PHOTONS, _FG, _SAMPLES, _CAUSTIC_FACTOR, _BINS, _WIDTH and _HEIGHT the render settings).
 //!
 //! Drives the real `ViewerApp` headless through egui_kittest at ~60 Hz on the prism at
 //! 512×512 and prints: UI frame time (CPU time to build the frame; GPU painting is not
@@ -33,8 +33,8 @@ fn main() {
     };
     let defaults = RenderSettings::default();
     let settings = RenderSettings {
-        width: 512,
-        height: 512,
+        width: env("PRISMAP_BENCH_WIDTH", 512) as u32,
+        height: env("PRISMAP_BENCH_HEIGHT", 512) as u32,
         photons_per_pass: env(
             "PRISMAP_BENCH_PHOTONS",
             RenderSettings::interactive().photons_per_pass,
@@ -104,7 +104,7 @@ fn main() {
     let used = &h.state().settings;
     let pool = h.state().worker_pool();
     println!(
-        "viewer benchmark: prism {}×{}, {} photons/pass (caustic ×{}), {} final-gather rays, {} camera samples, {} bins {}, {} worker threads{}",
+        "viewer benchmark: prism {}×{}, {} photons/pass (caustic ×{}), {} final-gather rays, {} camera samples, {} bins, compact and full storage alternating (a restart every 6 s), {} worker threads{}",
         used.width,
         used.height,
         used.photons_per_pass,
@@ -112,7 +112,6 @@ fn main() {
         used.final_gather_rays,
         used.camera_samples,
         used.bins,
-        used.storage.name(),
         pool.map_or(0, |p| p.threads),
         if pool.is_some_and(|p| p.below_ui) {
             format!(
