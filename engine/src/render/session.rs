@@ -347,8 +347,9 @@ impl RenderSession {
         s
     }
 
-    /// Runs one pass; on cancel (or when not even one photon fits the budget) the film is
-    /// unchanged.
+    /// Runs one pass (from the maps a [`RenderSession::run`] traced ahead for it, if it
+    /// left some; they are the ones this pass would trace); on cancel (or when not even one
+    /// photon fits the budget) the film is unchanged.
     pub fn run_pass(&mut self) -> Result<(), RenderError> {
         self.pass(false)
     }
