@@ -265,6 +265,47 @@ mod tests {
     }
 
     #[test]
+    fn maps_traced_ahead_of_a_stopped_run_serve_the_next_pass() {
+        // The viewer's case: a run stopped by its observer after a pass that traced the
+        // next one's photons; the session goes on (here with run_pass) from those maps,
+        // and the image is the one passes run one by one make.
+        let scene = scene::load_builtin("prism").unwrap();
+        let settings = RenderSettings {
+            width: 24,
+            height: 16,
+            photons_per_pass: 20_000,
+            ..RenderSettings::default()
+        };
+        let mut stopped = RenderSession::new(&scene, settings.clone()).unwrap();
+        let log = stopped
+            .run(Stop::passes(10), None, &mut |s, _| {
+                if s.stats().passes == 2 {
+                    Flow::Stop
+                } else {
+                    Flow::Continue
+                }
+            })
+            .unwrap();
+        assert_eq!(log.len(), 2);
+        assert!(
+            stopped.memory().next_pass_maps > 0,
+            "pass 3's maps were traced"
+        );
+        stopped.run_pass().unwrap();
+        assert_eq!(stopped.memory().next_pass_maps, 0);
+        stopped.run_pass().unwrap();
+        let mut alone = RenderSession::new(&scene, settings).unwrap();
+        for _ in 0..4 {
+            alone.run_pass().unwrap();
+        }
+        assert_eq!(bits(&stopped.image()), bits(&alone.image()));
+        assert_eq!(
+            stopped.stats().photons_emitted,
+            alone.stats().photons_emitted
+        );
+    }
+
+    #[test]
     fn the_error_log_measures_against_the_reference_and_refuses_another_size() {
         let mut r = session();
         let reference = r.image();
