@@ -20,12 +20,14 @@ fn render_picks_the_bins_the_scene_needs_unless_told() {
     // As the viewer's "auto": 100 bins for dispersive glass, 20 for a spectral light, 8
     // for RGB inputs; --bins and --preset win.
     let dir = temp_dir("bins");
-    let cases: [(&str, &[&str], u64); 5] = [
+    let cases: [(&str, &[&str], u64); 6] = [
         ("prism", &[], 100),
         ("cornell-blackbody", &[], 20),
         ("cornell-box", &[], 8),
         ("cornell-box", &["--bins", "12"], 12),
         ("prism", &["--preset", "preview"], 20),
+        // RGB storage has three channels and no bins to choose.
+        ("prism", &["--storage", "rgb"], 3),
     ];
     for (i, (scene, extra, bins)) in cases.into_iter().enumerate() {
         let stats = dir.join(format!("{i}.json"));

@@ -72,9 +72,21 @@ fn photons_traced_textured(bencher: Bencher, textured: bool) {
     );
 }
 
+/// What the gather benches query.
+struct GatherSetup {
+    scene: SpectralScene,
+    map: PhotonMap,
+    /// 2 000 photons' positions and surface normals.
+    points: Vec<(Vec3, Vec3)>,
+    /// The median 48-nearest radius.
+    r: f32,
+    /// The renderer's kind of adaptive kernel: 48 nearest, from `r` out to twice it.
+    kernel: Kernel,
+}
+
 /// A global map of the Cornell box (100 000 photons, 20 bins) and 2 000 of its photons'
-/// positions and surface normals to query at, with the median 48-nearest radius.
-fn gather_setup(storage: Storage) -> (SpectralScene, PhotonMap, Vec<(Vec3, Vec3)>, f32) {
+/// positions and surface normals to query at.
+fn gather_setup(storage: Storage) -> GatherSetup {
     let scene = cornell(20);
     let settings = PhotonSettings {
         photons: 100_000,
@@ -98,13 +110,31 @@ fn gather_setup(storage: Storage) -> (SpectralScene, PhotonMap, Vec<(Vec3, Vec3)
             (Vec3::from_array(map.positions()[i]), n)
         })
         .collect();
-    (scene, map, points, r)
+    let kernel = Kernel {
+        k: 48,
+        r_max: 2.0 * r,
+        r_start: r,
+        shrink: 1.0,
+    };
+    GatherSetup {
+        scene,
+        map,
+        points,
+        r,
+        kernel,
+    }
 }
 
 /// Fixed-radius queries on the global map (one thread), full vs compact at 20 bins.
 #[divan::bench(args = [Storage::Full, Storage::Compact], sample_count = 10)]
 fn gather_queries(bencher: Bencher, storage: Storage) {
-    let (scene, map, points, r) = gather_setup(storage);
+    let GatherSetup {
+        scene,
+        map,
+        points,
+        r,
+        ..
+    } = gather_setup(storage);
     let mut out = vec![0.0f32; 20];
     bencher
         .counter(ItemsCount::new(points.len()))
@@ -122,13 +152,13 @@ fn gather_queries(bencher: Bencher, storage: Storage) {
 /// surface, searched from the typical radius out to twice it, full vs compact at 20 bins.
 #[divan::bench(args = [Storage::Full, Storage::Compact], sample_count = 10)]
 fn gather_knn_estimates(bencher: Bencher, storage: Storage) {
-    let (scene, map, points, r) = gather_setup(storage);
-    let kernel = Kernel {
-        k: 48,
-        r_max: 2.0 * r,
-        r_start: r,
-        shrink: 1.0,
-    };
+    let GatherSetup {
+        scene,
+        map,
+        points,
+        kernel,
+        ..
+    } = gather_setup(storage);
     let mut out = vec![0.0f32; 20];
     let mut found = Vec::new();
     bencher
@@ -151,14 +181,22 @@ fn gather_knn_estimates(bencher: Bencher, storage: Storage) {
 /// twice the typical radius).
 #[divan::bench(args = [Storage::Full, Storage::Compact], sample_count = 10)]
 fn irradiance_lookups(bencher: Bencher, storage: Storage) {
-    let (scene, map, points, r) = gather_setup(storage);
-    let kernel = Kernel {
-        k: 48,
-        r_max: 2.0 * r,
-        r_start: r,
-        shrink: 1.0,
-    };
-    let cache = IrradianceCache::build(&map, &scene.grid, kernel, PRECOMPUTE_EVERY, 1e-6, 2.0 * r);
+    let GatherSetup {
+        scene,
+        map,
+        points,
+        kernel,
+        ..
+    } = gather_setup(storage);
+    let r_min = 1e-6 * scene.diagonal(); // as the renderer's
+    let cache = IrradianceCache::build(
+        &map,
+        &scene.grid,
+        kernel,
+        PRECOMPUTE_EVERY,
+        r_min,
+        kernel.r_max,
+    );
     let mut out = vec![0.0f32; 20];
     let mut found = Vec::new();
     bencher

@@ -157,6 +157,8 @@ fn rainbow_region(image: &Image) -> Rect {
 
 #[derive(Clone)]
 struct Outcome {
+    /// The PSNR targets, in dB.
+    targets: Vec<f64>,
     /// Render seconds and passes when each target was first reached.
     reached: Vec<Option<(f64, u64)>>,
     passes: u64,
@@ -215,6 +217,7 @@ fn run_to_targets(m: &Measure, settings: RenderSettings) -> Outcome {
         .expect("the run renders");
     let stats = session.stats();
     Outcome {
+        targets: targets.to_vec(),
         reached,
         passes: stats.passes,
         seconds: stats.photon_seconds + stats.gather_seconds,
@@ -456,8 +459,9 @@ fn main() {
                 (name, settings)
             })
             .collect();
+        // The defaults with the bins the viewer and `render` pick for this scene.
         let viewer_defaults = RenderSettings {
-            bins: 100,
+            bins: scene.auto_bins().0,
             ..base.clone()
         };
         let at_defaults = variants.iter().position(|(_, s)| *s == viewer_defaults);
@@ -502,8 +506,11 @@ fn print_issue_table(cornell: Option<&Outcome>, prism: Option<&Outcome>) {
         "| scene, target | prismap when filed | prismap now | goal | met? | other renderers (quoted) |"
     );
     println!("|---|---|---|---|---|---|");
-    let time = |o: &Outcome, target: usize| o.reached.get(target).copied().flatten();
-    let row = |scene: &str, filed: &str, o: &Outcome, target: usize, goal: f64, others: &str| {
+    let time = |o: &Outcome, target: f64| {
+        let i = o.targets.iter().position(|&t| t == target)?;
+        o.reached[i]
+    };
+    let row = |scene: &str, filed: &str, o: &Outcome, target: f64, goal: f64, others: &str| {
         let (now, met) = match time(o, target) {
             Some((s, p)) => (
                 format!("{s:.2} s ({p} passes)"),
@@ -521,7 +528,7 @@ fn print_issue_table(cornell: Option<&Outcome>, prism: Option<&Outcome>) {
             "Cornell box 128², 40 dB",
             "6.8–9.2 s",
             o,
-            2,
+            40.0,
             1.3,
             "Mitsuba 3.9 `scalar_spectral` 4.6 s, `llvm_ad_spectral` 1.3 s",
         );
@@ -531,7 +538,7 @@ fn print_issue_table(cornell: Option<&Outcome>, prism: Option<&Outcome>) {
             "prism rainbow (256² of pixels), 35 dB",
             "20 s (100 bins)",
             o,
-            1,
+            35.0,
             2.0,
             "LuxCoreRender 2.11 BDPT about 4 s",
         );

@@ -8,6 +8,7 @@ use anyhow::{Context, Result, bail};
 
 use super::{RenderArgs, ReportArgs, ViewArgs, check_writable};
 use crate::output::{self, Stats};
+use crate::photon::Storage;
 use crate::render::settings::{thread_count, validate_exposure};
 use crate::render::{ErrorReference, Flow, RenderSession, RenderSettings, Stop, error_csv};
 use crate::{app, report, scene};
@@ -32,8 +33,8 @@ pub fn render(args: RenderArgs) -> Result<()> {
     let exposure = args.exposure.map(validate_exposure).transpose()?;
     let stop = Stop::from_flags(args.passes, args.seconds)?;
     let mut settings = args.settings()?;
-    if args.bins.is_none() && args.preset.is_none() {
-        // The bins the scene needs, as the viewer picks them.
+    if args.bins.is_none() && args.preset.is_none() && settings.storage != Storage::Rgb {
+        // The bins the scene needs, as the viewer picks them (RGB storage has none).
         let (bins, why) = scene.auto_bins();
         settings.bins = bins;
         eprintln!("{}: {why} (--bins sets them)", scene.name);

@@ -144,8 +144,6 @@ pub struct RenderSession {
     spectra: Option<SpectralFilm>,
     /// Photon-map bytes per emitted photon in the latest pass (for the budget).
     bytes_per_emitted: Option<f64>,
-    /// This pass's typical (median k-nearest) radii of the global and caustic maps.
-    typical: (f32, f32),
     /// The next pass's maps, traced during the latest pass's gather.
     next: Option<Prepared>,
     /// Pixels whose centre sees an emitter directly (for exposure metering), once known.
@@ -228,7 +226,6 @@ impl RenderSession {
             probes: Vec::new(),
             spectra: None,
             bytes_per_emitted: None,
-            typical: (0.0, 0.0),
             next: None,
             emitter_pixels: std::sync::OnceLock::new(),
             guides: std::sync::OnceLock::new(),
@@ -380,7 +377,6 @@ impl RenderSession {
         };
         let photon_done = Instant::now();
         (self.r1_global, self.r1_caustic) = prepared.r1;
-        self.typical = prepared.typical;
         let (global_kernel, caustic_kernel) = prepared.kernels;
         let gather = Gather {
             scene: &self.scene,
