@@ -187,15 +187,25 @@ pub fn write_png8(path: &Path, bytes: &[u8], width: u32, height: u32) -> Result<
     })
 }
 
-/// Linear sRGB, 32-bit float, no exposure applied.
+/// Linear sRGB, 32-bit float, no exposure applied. Blocks are written in increasing
+/// order (the crate's default leaves the order to whichever compression thread finishes
+/// first), so the same image always makes the same file, byte for byte.
 pub fn write_exr(path: &Path, image: &Image) -> Result<(), OutputError> {
+    use exr::prelude::*;
     let (w, h) = (image.width as usize, image.height as usize);
     write_atomic(path, |tmp| {
-        exr::prelude::write_rgb_file(tmp, w, h, |x, y| {
+        let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
             let p = image.pixels[y * w + x];
             (p[0], p[1], p[2])
-        })
-        .map_err(|e| e.to_string())
+        });
+        let encoding = Encoding {
+            line_order: LineOrder::Increasing,
+            ..Encoding::FAST_LOSSLESS
+        };
+        Image::from_encoded_channels((w, h), encoding, channels)
+            .write()
+            .to_file(tmp)
+            .map_err(|e| e.to_string())
     })
 }
 
@@ -294,6 +304,37 @@ mod tests {
             pixels: vec![[0.0; 3]; 4],
         };
         assert_eq!(auto_exposure(&black), 1.0);
+    }
+
+    #[test]
+    fn the_same_image_makes_the_same_exr_file() {
+        // Many tiles compressed in parallel: the file must not depend on which thread
+        // finished first (it once did: blocks in completion order).
+        let (w, h) = (520u32, 300u32);
+        let mut rng = crate::sampling::Rng::stream(5, 0, 0, crate::sampling::Purpose::Camera);
+        let image = Image {
+            width: w,
+            height: h,
+            pixels: (0..w * h)
+                .map(|_| [rng.next_f32(), rng.next_f32(), 0.5])
+                .collect(),
+        };
+        let dir = std::env::temp_dir().join(format!("prismap-exr-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("same.exr");
+        write_exr(&path, &image).unwrap();
+        let first = std::fs::read(&path).unwrap();
+        let meta = exr::meta::MetaData::read_from_file(&path, false).unwrap();
+        assert_eq!(
+            meta.headers[0].line_order,
+            exr::meta::attribute::LineOrder::Increasing
+        );
+        for _ in 0..6 {
+            write_exr(&path, &image).unwrap();
+            assert!(std::fs::read(&path).unwrap() == first, "EXR bytes changed");
+        }
+        assert_eq!(read_exr(&path).unwrap(), image);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
