@@ -360,7 +360,7 @@ impl PhotonMap {
     }
 
     /// Stored photon `i`'s compact record (compact, packed and spiked storage).
-    #[inline]
+    #[inline(always)]
     fn compact_record(&self, i: usize) -> [f32; 3] {
         if self.record == Record::Packed {
             unpack_record(self.packed[i])
@@ -373,7 +373,7 @@ impl PhotonMap {
     /// Adds stored photon `i`'s spikes to `out` — a spike record's, and a spiked record's
     /// extra one — and returns its triplet, if its record holds one (compact, packed and
     /// spiked storage).
-    #[inline]
+    #[inline(always)]
     fn add_spikes(&self, i: usize, out: &mut [f32]) -> Option<[f32; 3]> {
         let mut add = |bin: usize, a: f32| {
             if let Some(v) = out.get_mut(bin) {
