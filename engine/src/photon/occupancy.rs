@@ -3,7 +3,8 @@
 //! On the prism, 86 % of the caustic map's estimates (one per camera sample that reaches a
 //! diffuse surface) lie where no caustic photon is within the search cap, and an empty kd
 //! range search at the cap cost about 600 ns; a hash probe of 8 cubes (27 when a sphere's
-//! padded bounds straddle a third) does not.
+//! padded bounds straddle a third) does not. Most of those queries are answered by one
+//! probe: of the set of cubes next to an occupied one.
 
 use std::collections::HashSet;
 use std::hash::BuildHasherDefault;
@@ -21,8 +22,13 @@ pub struct Occupancy {
     /// bounds reach into a third).
     side: f32,
     inv_side: f32,
-    cubes: HashSet<Cube, BuildHasherDefault<CellHasher>>,
+    cubes: CubeSet,
+    /// Every cube within one step (of 27) of an occupied cube: a query whose own cube is
+    /// not among them has no photon within half a side, without probing 8 cubes.
+    near: CubeSet,
 }
+
+type CubeSet = HashSet<Cube, BuildHasherDefault<CellHasher>>;
 
 fn cube_of(v: f32) -> i32 {
     // NaN casts to 0: a non-finite query gets a (conservative) probe, not a panic.
@@ -34,17 +40,28 @@ impl Occupancy {
     pub fn build(positions: &[[f32; 3]], r_max: f32) -> Self {
         let side = 2.0 * r_max;
         let inv_side = 1.0 / side;
-        let cubes = positions
+        let cubes: CubeSet = positions
             .iter()
             .map(|p| {
                 let q = |v: f32| cube_of(v * inv_side);
                 (q(p[0]), q(p[1]), q(p[2]))
             })
             .collect();
+        let mut near = CubeSet::default();
+        for &(x, y, z) in &cubes {
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        near.insert((x + dx, y + dy, z + dz));
+                    }
+                }
+            }
+        }
         Self {
             side,
             inv_side,
             cubes,
+            near,
         }
     }
 
@@ -54,6 +71,13 @@ impl Occupancy {
     pub fn may_hold_within(&self, p: Vec3, r: f32) -> bool {
         if !(2.0 * r <= self.side) {
             return true;
+        }
+        // A photon within r ≤ side/2 of p is less than a side away along each axis, so its
+        // cube is p's or a neighbour of p's (cube indices a few units below 2²⁴ of the
+        // query's coordinates round far less than the half side to spare).
+        let own = (p * self.inv_side).to_array().map(cube_of);
+        if !self.near.contains(&(own[0], own[1], own[2])) {
+            return false;
         }
         // Padded past f32 rounding of p ± r, so that a photon on the sphere's edge is
         // never in a cube left out.
@@ -101,6 +125,15 @@ mod tests {
             let may = grid.may_hold_within(p, r);
             wrong += (near && !may) as u32;
             empty += !may as u32;
+        }
+        // Queries just within r of a photon, in every direction (across cube faces and
+        // corners): every one must be a "may".
+        for i in 0..20_000 {
+            let q = Vec3::from_array(positions[i % positions.len()]);
+            let r = r_max * (0.05 + 0.95 * rng.next_f32());
+            let dir = crate::sampling::uniform_sphere(rng.next_2d());
+            let p = q + dir * r * 0.999;
+            wrong += (!grid.may_hold_within(p, r)) as u32;
         }
         assert_eq!(wrong, 0);
         // Most of the cube [-1, 1]³ is far from both clumps.
