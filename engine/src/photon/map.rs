@@ -502,7 +502,13 @@ impl PhotonMap {
         let r2_k = if found.len() >= kernel.k {
             let by_distance = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0);
             let (_, kth, _) = found.select_nth_unstable_by(kernel.k - 1, by_distance);
-            kth.0
+            let r2_k = kth.0;
+            // Past the k-th lie only photons at least r_k away: none is inside a radius
+            // shrunk below r_k, so the sum below need not look at them.
+            if kernel.shrink <= 1.0 {
+                found.truncate(kernel.k);
+            }
+            r2_k
         } else if r < kernel.r_max {
             let r2_max = kernel.r_max * kernel.r_max;
             kdtree::k_nearest_within(
