@@ -25,17 +25,59 @@ fn cornell(bins: usize) -> SpectralScene {
     )
 }
 
-/// Emits and traces 50 000 photons of `scene` (all threads, compact storage) per iteration.
-fn bench_tracing(bencher: Bencher, scene: &SpectralScene) {
-    let settings = PhotonSettings {
-        photons: 50_000,
-        record: Storage::Compact.record(),
+/// The photon pass's settings the benches trace with (no budget).
+fn photon_settings(photons: usize, storage: Storage, caustic_factor: usize) -> PhotonSettings {
+    PhotonSettings {
+        photons,
+        record: storage.record(),
         max_bounces: 1024,
         dispersion_split: 4,
         caustic_map: true,
-        caustic_factor: 1,
+        caustic_factor,
         max_map_bytes: usize::MAX,
-    };
+    }
+}
+
+/// Every `step`-th photon of `map` (at most `count`) as a query: its position and its own
+/// stored surface normal, as the gather's queries are.
+fn photon_queries(map: &PhotonMap, step: usize, count: usize) -> Vec<(Vec3, Vec3)> {
+    (0..map.len())
+        .step_by(step.max(1))
+        .take(count)
+        .map(|i| {
+            let n = oct_decode(map.normal_code(i));
+            (Vec3::from_array(map.positions()[i]), n)
+        })
+        .collect()
+}
+
+/// Runs `kernel`'s density estimate at every point (one thread), the grid's bins wide.
+fn bench_estimates(
+    bencher: Bencher,
+    grid: &BinGrid,
+    map: &PhotonMap,
+    kernel: Kernel,
+    points: &[(Vec3, Vec3)],
+) {
+    let mut out = vec![0.0f32; grid.len()];
+    let mut found = Vec::new();
+    bencher
+        .counter(ItemsCount::new(points.len()))
+        .bench_local(|| {
+            let mut radii = 0.0;
+            for &(p, normal) in points {
+                out.fill(0.0);
+                radii += map
+                    .estimate(grid, p, normal, kernel, &mut found, &mut out)
+                    .r;
+            }
+            radii
+        });
+}
+
+/// Emits and traces 50 000 photons of `scene` (all threads, compact storage) per iteration.
+fn bench_tracing(bencher: Bencher, scene: &SpectralScene) {
+    let settings = photon_settings(50_000, Storage::Compact, 1);
     let cancel = AtomicBool::new(false);
     bencher
         .counter(ItemsCount::new(settings.photons))
@@ -88,28 +130,12 @@ struct GatherSetup {
 /// positions and surface normals to query at.
 fn gather_setup(storage: Storage) -> GatherSetup {
     let scene = cornell(20);
-    let settings = PhotonSettings {
-        photons: 100_000,
-        record: Storage::record(storage),
-        max_bounces: 1024,
-        dispersion_split: 4,
-        caustic_map: true,
-        caustic_factor: 1,
-        max_map_bytes: usize::MAX,
-    };
+    let settings = photon_settings(100_000, storage, 1);
     let map = trace_photons(&scene, &settings, 1, 1, &AtomicBool::new(false))
         .unwrap()
         .global;
     let r = map.typical_knn_radius(48, 256).unwrap();
-    // Each query on a photon's own surface (its stored normal), as the gather's are.
-    let points = (0..map.len())
-        .step_by(97)
-        .take(2000)
-        .map(|i| {
-            let n = oct_decode(map.normal_code(i));
-            (Vec3::from_array(map.positions()[i]), n)
-        })
-        .collect();
+    let points = photon_queries(&map, 97, 2000);
     let kernel = Kernel {
         k: 48,
         r_max: 2.0 * r,
@@ -159,20 +185,7 @@ fn gather_knn_estimates(bencher: Bencher, storage: Storage) {
         kernel,
         ..
     } = gather_setup(storage);
-    let mut out = vec![0.0f32; 20];
-    let mut found = Vec::new();
-    bencher
-        .counter(ItemsCount::new(points.len()))
-        .bench_local(|| {
-            let mut radii = 0.0;
-            for &(p, normal) in &points {
-                out.fill(0.0);
-                radii += map
-                    .estimate(&scene.grid, p, normal, kernel, &mut found, &mut out)
-                    .r;
-            }
-            radii
-        });
+    bench_estimates(bencher, &scene.grid, &map, kernel, &points);
 }
 
 /// What a final-gather ray reads (one thread): the irradiance precomputed at every
@@ -221,15 +234,7 @@ fn caustic_estimates(bencher: Bencher) {
         &load_builtin("prism").unwrap(),
         BinGrid::with_bins(100).unwrap(),
     );
-    let settings = PhotonSettings {
-        photons: 25_000,
-        record: Storage::Compact.record(),
-        max_bounces: 1024,
-        dispersion_split: 4,
-        caustic_map: true,
-        caustic_factor: 4,
-        max_map_bytes: usize::MAX,
-    };
+    let settings = photon_settings(25_000, Storage::Compact, 4);
     let map = trace_photons(&scene, &settings, 1, 1, &AtomicBool::new(false))
         .unwrap()
         .caustic
@@ -242,29 +247,8 @@ fn caustic_estimates(bencher: Bencher) {
         r_start: 1.2 * r,
         shrink: 1.0,
     };
-    let step = (map.len() / 2000).max(1);
-    let points: Vec<(Vec3, Vec3)> = (0..map.len())
-        .step_by(step)
-        .take(2000)
-        .map(|i| {
-            let n = oct_decode(map.normal_code(i));
-            (Vec3::from_array(map.positions()[i]), n)
-        })
-        .collect();
-    let mut out = vec![0.0f32; 100];
-    let mut found = Vec::new();
-    bencher
-        .counter(ItemsCount::new(points.len()))
-        .bench_local(|| {
-            let mut radii = 0.0;
-            for &(p, normal) in &points {
-                out.fill(0.0);
-                radii += map
-                    .estimate(&scene.grid, p, normal, kernel, &mut found, &mut out)
-                    .r;
-            }
-            radii
-        });
+    let points = photon_queries(&map, map.len() / 2000, 2000);
+    bench_estimates(bencher, &scene.grid, &map, kernel, &points);
 }
 
 /// Closest-hit rays through the CWBVH (one thread), incoherent directions from the box centre.
