@@ -18,6 +18,8 @@ pub const LEAF: usize = 16;
 // A split range holds more than LEAF ≥ 2 photons, so both halves beside its median are
 // non-empty: the searches push a far side without checking it.
 const _: () = assert!(LEAF >= 2);
+// A leaf's hits fit one u32 bit mask (see `scan_leaf`).
+const _: () = assert!(LEAF <= 32);
 
 /// The offset from `q` to `p` and its squared length, the one distance every search uses.
 #[inline(always)]

@@ -72,12 +72,16 @@ impl Occupancy {
         if !(2.0 * r <= self.side) {
             return true;
         }
-        // A photon within r ≤ side/2 of p is less than a side away along each axis, so its
-        // cube is p's or a neighbour of p's (cube indices a few units below 2²⁴ of the
-        // query's coordinates round far less than the half side to spare).
-        let own = (p * self.inv_side).to_array().map(cube_of);
-        if !self.near.contains(&(own[0], own[1], own[2])) {
-            return false;
+        // A photon within r ≤ side/2 of p is at most half a side away along each axis, so
+        // its cube is p's or a neighbour of p's. That holds for the rounded cube
+        // coordinates while they stay below 2²² (rounding each by under a quarter side);
+        // farther out, only the padded probe below answers.
+        let own = p * self.inv_side;
+        if own.abs().max_element() < (1u32 << 22) as f32 {
+            let c = own.to_array().map(cube_of);
+            if !self.near.contains(&(c[0], c[1], c[2])) {
+                return false;
+            }
         }
         // Padded past f32 rounding of p ± r, so that a photon on the sphere's edge is
         // never in a cube left out.
