@@ -225,10 +225,15 @@ impl LightSet {
         [u_light, u, v]: [f32; 3],
         out: &mut [f32],
     ) {
-        out.fill(0.0);
-        if let Some(s) = self.sample_direct_at(tris, accel, p, nf, u_light, [u, v]) {
-            out.copy_from_slice(&self.lights[s.light].spectrum);
-            spd::scale(out, s.cos * s.weight);
+        match self.sample_direct_at(tris, accel, p, nf, u_light, [u, v]) {
+            Some(s) => {
+                let (spectrum, k) = (&self.lights[s.light].spectrum, s.cos * s.weight);
+                debug_assert_eq!(spectrum.len(), out.len());
+                for (o, l) in out.iter_mut().zip(spectrum) {
+                    *o = l * k;
+                }
+            }
+            None => out.fill(0.0),
         }
     }
 

@@ -207,11 +207,16 @@ impl Gather<'_> {
                 SurfaceKind::Diffuse { reflectance } => {
                     let mut buf = std::mem::take(&mut s.refl);
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut buf);
-                    self.shade_diffuse(p, nf, reflectance, rng, fg, s);
-                    s.refl = buf;
-                    for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(&s.acc) {
-                        *o += t * l;
+                    self.shade_diffuse(p, nf, rng, fg, s);
+                    // Lambertian radiance ρ E / π, times the path's throughput, in one
+                    // pass over the bins.
+                    debug_assert_eq!(reflectance.len(), s.acc.len());
+                    let inv_pi = std::f32::consts::FRAC_1_PI;
+                    let light = s.throughput.iter().zip(&s.acc).zip(reflectance);
+                    for (o, ((t, e), r)) in out.iter_mut().zip(light) {
+                        *o += t * (e * r * inv_pi);
                     }
+                    s.refl = buf;
                     return;
                 }
                 kind => {
@@ -288,17 +293,9 @@ impl Gather<'_> {
         }
     }
 
-    /// Outgoing radiance of a diffuse point towards the camera, into `s.acc`.
-    fn shade_diffuse(
-        &self,
-        p: Vec3,
-        nf: Vec3,
-        reflectance: &[f32],
-        rng: &mut Rng,
-        fg: GatherSequence,
-        s: &mut Scratch,
-    ) {
-        let inv_pi = std::f32::consts::FRAC_1_PI;
+    /// Irradiance at a diffuse point the camera sees, into `s.acc` (the caller turns it
+    /// into radiance with the surface's reflectance).
+    fn shade_diffuse(&self, p: Vec3, nf: Vec3, rng: &mut Rng, fg: GatherSequence, s: &mut Scratch) {
         s.acc.fill(0.0);
         if self.final_gather_rays == 0 {
             // Direct visualisation of the global map: all light in one estimate.
@@ -311,8 +308,6 @@ impl Gather<'_> {
                 &mut s.found,
                 &mut s.acc,
             );
-            spd::mul_assign(&mut s.acc, reflectance);
-            spd::scale(&mut s.acc, inv_pi);
             return;
         }
         // Direct light by light sampling.
@@ -321,7 +316,7 @@ impl Gather<'_> {
         let u_light = [rng.next_f32(), u, v];
         (scene.lights).direct(&scene.tris, &scene.accel, p, nf, u_light, &mut s.tmp);
         spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
-        // Caustics from the caustic map (irradiance, converted to radiance below).
+        // Caustics from the caustic map (irradiance, like the other two terms).
         if let Some(cm) = self.caustic {
             let kernel = self.caustic_kernel;
             self.density(cm, p, nf, kernel, &mut s.hints[1], &mut s.found, &mut s.tmp);
@@ -344,8 +339,6 @@ impl Gather<'_> {
             let weight = std::f32::consts::PI * samples / self.final_gather_rays as f32;
             spd::add_scaled(&mut s.acc, &s.fg, weight);
         }
-        spd::mul_assign(&mut s.acc, reflectance);
-        spd::scale(&mut s.acc, inv_pi);
     }
 
     /// Radiance along a final-gather ray from the global map at its first diffuse hit
@@ -385,9 +378,12 @@ impl Gather<'_> {
                         }
                     }
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
-                    spd::mul_assign(out, reflectance);
-                    spd::mul_assign(out, t);
-                    spd::scale(out, std::f32::consts::FRAC_1_PI);
+                    // ρ E / π times the ray's throughput, in one pass over the bins.
+                    debug_assert_eq!(reflectance.len(), out.len());
+                    let inv_pi = std::f32::consts::FRAC_1_PI;
+                    for (o, (r, t)) in out.iter_mut().zip(reflectance.iter().zip(t.iter())) {
+                        *o = *o * r * t * inv_pi;
+                    }
                     return;
                 }
                 kind => match self.specular_bounce(kind, &hit, dir, t, texel, &mut lambda_u, rng) {
