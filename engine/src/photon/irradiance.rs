@@ -214,7 +214,6 @@ impl IrradianceCache {
         found: &mut Vec<(f32, u32)>,
         out: &mut [f32],
     ) -> bool {
-        out.fill(0.0);
         let accept = |i: usize| {
             let d = Vec3::from_array(self.positions[i]) - p;
             let h = d.dot(n);
@@ -233,13 +232,20 @@ impl IrradianceCache {
                 kdtree::k_nearest_within(&self.positions, &self.axes, p, 1, r2, accept, found);
                 match found.first() {
                     Some(&(_, i)) => i,
-                    None => return false,
+                    None => {
+                        out.fill(0.0);
+                        return false;
+                    }
                 }
             }
         };
         let v = &self.values[i as usize * self.stride..(i as usize + 1) * self.stride];
         match (self.record, grid.smits()) {
-            (Record::Compact, Some(_)) => grid.decode_triplet_into([v[0], v[1], v[2]], out),
+            (Record::Compact, Some(_)) => {
+                out.fill(0.0);
+                grid.decode_triplet_into([v[0], v[1], v[2]], out)
+            }
+            // Every bin overwritten: no clearing first.
             _ => out.copy_from_slice(v),
         }
         true
