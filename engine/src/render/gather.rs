@@ -124,11 +124,6 @@ impl GatherSequence {
 }
 
 impl Gather<'_> {
-    /// Camera ray direction through image position (x, y) in pixels (may be fractional).
-    pub fn camera_dir(&self, x: f32, y: f32, width: u32, height: u32) -> Vec3 {
-        camera_dir(&self.scene.camera, x, y, width, height)
-    }
-
     /// Radiance (N bins) arriving at the camera through pixel (px, py): the mean of
     /// `camera_samples` rays through points of the pixel's own low-discrepancy sequence
     /// ([`pixel_jitter`]), continued from pass to pass.
