@@ -61,6 +61,7 @@ fn render_picks_the_bins_the_scene_needs_unless_told() {
             "{stderr}"
         );
     }
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
