@@ -106,6 +106,11 @@ pub struct GatherSequence {
     /// The camera ray's point within the pixel: a Kronecker sequence of its own (see
     /// [`pixel_jitter`]), one point a pass, same index as the light's.
     jitter_offset: [f32; 2],
+    /// Where the camera ray's wavelength falls, when dispersive glass picks one: a 1-D
+    /// low-discrepancy sequence of its own ([`spectral_point`]), same index as the light's, so
+    /// that a pixel's samples over the passes spread over the spectrum instead of
+    /// clumping (the colour noise of glass seen directly).
+    spectral_offset: f32,
 }
 
 impl GatherSequence {
@@ -119,6 +124,7 @@ impl GatherSequence {
             light_offset: r.next_2d(),
             light_index: (pass >> 1).wrapping_mul(samples.max(1) as u64) as u32,
             jitter_offset: r.next_2d(),
+            spectral_offset: r.next_f32(),
         }
     }
 }
@@ -154,18 +160,30 @@ impl Gather<'_> {
             let [jx, jy] = pixel_jitter(sample.light_index, fg.jitter_offset);
             let (x, y) = (px as f32 + jx, py as f32 + jy);
             let dir = camera_dir_with(camera, tan_y, x, y, width, height);
-            self.radiance(self.scene.camera.position, dir, rng, sample, s, out);
+            let spectral_u = spectral_point(sample.light_index, fg.spectral_offset);
+            self.radiance(
+                self.scene.camera.position,
+                dir,
+                spectral_u,
+                rng,
+                sample,
+                s,
+                out,
+            );
         }
         if samples > 1 {
             spd::scale(out, 1.0 / samples as f32);
         }
     }
 
-    /// Radiance along a camera ray, added to `out`.
+    /// Radiance along a camera ray, added to `out`. `spectral_u` (uniform in [0, 1))
+    /// chooses the wavelength if dispersive glass splits the path.
+    #[allow(clippy::too_many_arguments)]
     fn radiance(
         &self,
         mut origin: Vec3,
         mut dir: Vec3,
+        spectral_u: f32,
         rng: &mut Rng,
         fg: GatherSequence,
         s: &mut Scratch,
@@ -175,6 +193,7 @@ impl Gather<'_> {
         s.throughput.fill(1.0);
         // Where within its bin the path's wavelength lies, once dispersive glass picks it.
         let mut lambda_u = None;
+        let mut spectral_u = Some(spectral_u);
         for _ in 0..self.max_bounces {
             let Some(hit) = scene.intersect(origin, dir) else {
                 // An escaping path sees the sky, if the scene has one.
@@ -217,7 +236,8 @@ impl Gather<'_> {
                 kind => {
                     self.rough_highlight(kind, &hit, dir, rng, s, out);
                     let (t, texel) = (&mut s.throughput, &mut s.refl);
-                    match self.specular_bounce(kind, &hit, dir, t, texel, &mut lambda_u, rng) {
+                    let wl = (&mut lambda_u, &mut spectral_u);
+                    match self.specular_bounce(kind, &hit, dir, t, texel, wl, rng) {
                         Some((o, d)) => (origin, dir) = (o, d),
                         None => return,
                     }
@@ -381,7 +401,15 @@ impl Gather<'_> {
                     }
                     return;
                 }
-                kind => match self.specular_bounce(kind, &hit, dir, t, texel, &mut lambda_u, rng) {
+                kind => match self.specular_bounce(
+                    kind,
+                    &hit,
+                    dir,
+                    t,
+                    texel,
+                    (&mut lambda_u, &mut None),
+                    rng,
+                ) {
                     Some((o, d)) => (origin, dir) = (o, d),
                     None => return,
                 },
@@ -410,7 +438,7 @@ impl Gather<'_> {
         dir: Vec3,
         t: &mut [f32],
         texel: &mut Vec<f32>,
-        lambda_u: &mut Option<f32>,
+        (lambda_u, spectral_u): (&mut Option<f32>, &mut Option<f32>),
         rng: &mut Rng,
     ) -> Option<(Vec3, Vec3)> {
         let (p, n, nf, ns) = (hit.p, hit.n, hit.nf, hit.ns);
@@ -436,7 +464,11 @@ impl Gather<'_> {
                     (_, Some(bin)) => bin,
                     (false, None) => 0,
                     (true, None) => {
-                        let bin = pick_bin(t, rng.next_f32())?;
+                        // The camera path's own stratified number, else a random one; the
+                        // pick's remainder places the wavelength within its bin.
+                        let u = spectral_u.take().unwrap_or_else(|| rng.next_f32());
+                        let (bin, within) = pick_bin(t, u)?;
+                        lambda_u.get_or_insert(within);
                         let total = spd::sum(t);
                         t.fill(0.0);
                         t[bin] = total;
@@ -513,8 +545,10 @@ fn roulette_when_faint_after(t: &mut [f32], w: f32, u: f32) -> bool {
     roulette_when_faint(t, u)
 }
 
-/// A bin drawn with probability ∝ `t`.
-fn pick_bin(t: &[f32], u: f32) -> Option<usize> {
+/// A bin drawn with probability ∝ `t` by inverting its distribution at `u` ∈ [0, 1), and
+/// where `u` fell within the bin's share (uniform in [0, 1) given the bin, so it can place
+/// the wavelength within the bin without a random number of its own).
+fn pick_bin(t: &[f32], u: f32) -> Option<(usize, f32)> {
     let total = spd::sum(t);
     if !(total > 0.0) {
         return None;
@@ -524,14 +558,36 @@ fn pick_bin(t: &[f32], u: f32) -> Option<usize> {
     let mut last = None;
     for (i, &v) in t.iter().enumerate() {
         if v > 0.0 {
+            let before = acc;
             acc += v;
             last = Some(i);
             if acc > target {
-                return Some(i);
+                return Some((i, within_unit((target - before) / v)));
             }
         }
     }
-    last
+    // Rounding left the target past the last share: the top of the last bin.
+    last.map(|i| (i, within_unit(1.0)))
+}
+
+/// `x` clamped into [0, 1).
+fn within_unit(x: f32) -> f32 {
+    x.clamp(0.0, 1.0 - f32::EPSILON / 2.0)
+}
+
+/// Point `i` of the 1-D Kronecker sequence of step √2 − 1 rotated by `offset`
+/// (Cranley–Patterson), for the camera path's wavelength: any first n points leave at most
+/// two in each of n equal intervals. The step is chosen against the sequences it runs beside
+/// at the same index — the pixel's and the light's Kronecker steps and the final-gather
+/// (0,2)-sequence — so that the wavelength follows none of them: 1/φ₄ is an integer
+/// relation away from the pixel's R4 steps, the golden ratio lies 0.011 from one of them,
+/// and radical inverses (base 3 or 5) line up with the (0,2)-sequence's second coordinate
+/// (test `a_pixels_wavelengths_cover_the_spectrum_evenly_and_follow_no_other_sequence`).
+#[inline]
+fn spectral_point(i: u32, offset: f32) -> f32 {
+    const A: f64 = std::f64::consts::SQRT_2 - 1.0;
+    let v = ((offset as f64 + i as f64 * A).fract()) as f32;
+    if v < 1.0 { v } else { 0.0 }
 }
 
 /// Point `i` of a 2-D Kronecker sequence rotated by `offset`, for the camera ray's
@@ -609,6 +665,82 @@ mod tests {
                 // The check can tell: a second R2 copy leaves cells empty.
                 let c = cells(&mut (0..256).map(|i| (r2(i, o_pixel)[a], r2(i, o_light)[a])));
                 assert!(c.contains(&0), "dim {a}: {c:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_bin_pick_inverts_the_throughput_and_its_remainder_is_uniform_in_the_bin() {
+        // Bins of weight 0, 1, 3, 0, 4 (total 8), picked at 8 000 evenly spaced u: each
+        // positive bin 1 000 times its weight (to within one), and within each bin the
+        // remainders fall one in each of its own count's equal intervals (to within one).
+        let t = [0.0, 1.0, 3.0, 0.0, 4.0];
+        let m = 8000;
+        let mut within: [Vec<f32>; 5] = Default::default();
+        for j in 0..m {
+            let (bin, w) = pick_bin(&t, (j as f32 + 0.5) / m as f32).unwrap();
+            assert!((0.0..1.0).contains(&w), "{w}");
+            within[bin].push(w);
+        }
+        for (bin, ws) in within.iter_mut().enumerate() {
+            let want = t[bin] / 8.0 * m as f32;
+            assert!(
+                (ws.len() as f32 - want).abs() <= 1.0,
+                "bin {bin}: {}",
+                ws.len()
+            );
+            ws.sort_by(f32::total_cmp);
+            let n = ws.len() as f32;
+            for (k, w) in ws.iter().enumerate() {
+                assert!(
+                    (w - (k as f32 + 0.5) / n).abs() <= 1.5 / n,
+                    "bin {bin}: {k}th {w}"
+                );
+            }
+        }
+        // The top of the range stays in the last positive bin, below 1; nothing to pick
+        // from gives no bin.
+        let (bin, w) = pick_bin(&t, 1.0 - f32::EPSILON / 2.0).unwrap();
+        assert!(bin == 4 && w < 1.0, "{bin} {w}");
+        assert_eq!(pick_bin(&[0.0; 4], 0.5), None);
+    }
+
+    #[test]
+    fn a_pixels_wavelengths_cover_the_spectrum_evenly_and_follow_no_other_sequence() {
+        let mut rng = Rng::stream(9, 0, 0, Purpose::Camera);
+        for _ in 0..16 {
+            let offset = rng.next_f32();
+            // The first n points for any n ≤ 300: at most two in each of n equal intervals
+            // (independent uniform points put 4 to 6 in the fullest interval at these n).
+            for n in 2..=300u32 {
+                let mut c = vec![0u32; n as usize];
+                for i in 0..n {
+                    let u = spectral_point(i, offset);
+                    assert!((0.0..1.0).contains(&u), "{u}");
+                    c[((u * n as f32) as usize).min(n as usize - 1)] += 1;
+                }
+                let most = *c.iter().max().unwrap();
+                assert!(most <= 2, "n {n}: {most}");
+            }
+            // Against the pixel's, the light's and the final-gather sequences at the same
+            // index (as when a camera sample carries one final-gather ray): every cell of a
+            // 4 × 4 grid of (wavelength, other coordinate) over 256 points holds at least 8.
+            let (o_pixel, o_light) = (rng.next_2d(), rng.next_2d());
+            let scramble = [rng.next_u32(), rng.next_u32()];
+            for a in 0..2 {
+                let others: [&dyn Fn(u32) -> f32; 3] = [
+                    &|i| pixel_jitter(i, o_pixel)[a],
+                    &|i| r2(i, o_light)[a],
+                    &|i| sobol02(i, scramble)[a],
+                ];
+                for (which, other) in others.iter().enumerate() {
+                    let mut c = [0u32; 16];
+                    for i in 0..256 {
+                        let (x, y) = (spectral_point(i, offset), other(i));
+                        c[((x * 4.0) as usize).min(3) * 4 + ((y * 4.0) as usize).min(3)] += 1;
+                    }
+                    assert!(c.iter().all(|&n| n >= 8), "sequence {which} dim {a}: {c:?}");
+                }
             }
         }
     }
