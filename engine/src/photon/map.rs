@@ -227,7 +227,43 @@ pub struct Kernel {
     pub shrink: f32,
 }
 
+/// Fewest neighbours [`Kernel::adaptive`] searches for; below this the shrink is applied
+/// to the radius instead.
+pub const MIN_SHRUNK_K: usize = 8;
+
 impl Kernel {
+    /// A k-nearest kernel at this pass's Knaus–Zwicker `shrink`, searched as cheaply as it
+    /// can be. Shrinking the k-nearest radius r_k by s sums on average m = (k−1)·s²
+    /// photons; the same is summed, in expectation and at the same expected radius, by
+    /// searching only the k' = ⌈m⌉ + 1 nearest (at least [`MIN_SHRUNK_K`], at most k) and
+    /// shrinking their radius by s' = √(m / (k'−1)) ≤ 1: in a uniform region
+    /// E[(k'−1)·s'² / (π s'² r²_k')] = λ as before. The search radii (`r_start`, `r_max`)
+    /// scale by q = √((k'−1)/(k−1)), so a neighbourhood too sparse to hold k' photons
+    /// within q·`r_max` is summed within s'·q·`r_max` = s·`r_max`, as the unfolded kernel
+    /// sums one holding fewer than k within `r_max`. Late passes thus search for a third of
+    /// the photons, not all k, to sum the third they keep.
+    pub fn adaptive(k: usize, r_max: f32, r_start: f32, shrink: f32) -> Self {
+        let unfolded = Self {
+            k,
+            r_max,
+            r_start,
+            shrink,
+        };
+        if k <= MIN_SHRUNK_K || !(shrink > 0.0 && shrink < 1.0) {
+            return unfolded;
+        }
+        let m = (k - 1) as f64 * f64::from(shrink) * f64::from(shrink);
+        let k_eff = ((m.ceil() as usize) + 1).clamp(MIN_SHRUNK_K, k);
+        let q = (((k_eff - 1) as f64) / ((k - 1) as f64)).sqrt();
+        let s = (m / (k_eff - 1) as f64).sqrt().min(1.0);
+        Self {
+            k: k_eff,
+            r_max: (f64::from(r_max) * q) as f32,
+            r_start: (f64::from(r_start) * q) as f32,
+            shrink: s as f32,
+        }
+    }
+
     /// This kernel with its first search radius at `hint` (a neighbouring query's
     /// k-nearest radius), if one is known (> 0). The result never depends on the start:
     /// only how much searching finds it.
@@ -731,5 +767,85 @@ mod tests {
         let mut one = vec![0.0; 20];
         map.flux_of(&grid, 0, &mut one);
         assert_eq!(one, got);
+    }
+
+    #[test]
+    fn a_folded_kernel_estimates_what_the_unfolded_one_does_from_fewer_neighbours() {
+        // 40 000 photons of flux 1e-4 uniform on the unit square: E = 4 per unit area.
+        let grid = BinGrid::with_bins(4).unwrap();
+        let mut b = PhotonBatch::new(Record::Full, &grid);
+        let mut rng = crate::sampling::Rng::stream(5, 0, 0, crate::sampling::Purpose::Photon);
+        for _ in 0..40_000 {
+            let [x, y] = rng.next_2d();
+            b.push(&grid, Vec3::new(x, y, 0.0), Vec3::Z, &[1e-4; 4]);
+        }
+        let map = PhotonMap::build(b);
+        let (mut found, mut out) = (Vec::new(), vec![0.0; 4]);
+        for shrink in [1.0f32, 0.8, 0.5, 0.3] {
+            let plain = Kernel {
+                k: 96,
+                r_max: 0.2,
+                r_start: 0.03,
+                shrink,
+            };
+            let folded = Kernel::adaptive(96, 0.2, 0.03, shrink);
+            assert!((MIN_SHRUNK_K..=96).contains(&folded.k), "{folded:?}");
+            assert!(folded.shrink <= 1.0 && folded.shrink > 0.0, "{folded:?}");
+            if shrink < 1.0 {
+                assert!(folded.k < 96, "{shrink}: {folded:?}");
+            } else {
+                assert_eq!(folded, plain);
+            }
+            // Mean irradiance over 1 600 query points, and mean photons summed.
+            let mut mean = |kernel: Kernel| {
+                let (mut e, mut summed) = (0.0f64, 0usize);
+                for i in 0..1600 {
+                    let p = Vec3::new(
+                        0.3 + 0.4 * (i % 40) as f32 / 40.0,
+                        0.3 + 0.4 * (i / 40) as f32 / 40.0,
+                        0.0,
+                    );
+                    out.fill(0.0);
+                    let est = map.estimate(&grid, p, Vec3::Z, kernel, &mut found, &mut out);
+                    summed += found.iter().filter(|f| f.0 < est.r * est.r).count();
+                    e += f64::from(out[0]) / (std::f64::consts::PI * f64::from(est.r).powi(2));
+                }
+                (e / 1600.0, summed as f64 / 1600.0)
+            };
+            let (e_plain, n_plain) = mean(plain);
+            let (e_folded, n_folded) = mean(folded);
+            // Both unbiased (4 % is over 4 standard errors at the fewest summed).
+            assert!((e_plain / 4.0 - 1.0).abs() < 0.04, "{shrink}: {e_plain}");
+            assert!((e_folded / 4.0 - 1.0).abs() < 0.04, "{shrink}: {e_folded}");
+            // Summing as many photons on average: (k−1)·s².
+            let m = 95.0 * f64::from(shrink).powi(2);
+            for n in [n_plain, n_folded] {
+                assert!(
+                    (n / m - 1.0).abs() < 0.1,
+                    "{shrink}: {n} summed, {m} expected"
+                );
+            }
+        }
+        // Where fewer than k photons lie within the cap, both sum within s·r_max.
+        let mut b = PhotonBatch::new(Record::Full, &grid);
+        for d in [0.049f32, 0.051, 0.09] {
+            b.push(&grid, Vec3::new(d, 0.0, 0.0), Vec3::Z, &[1.0; 4]);
+        }
+        let sparse = PhotonMap::build(b);
+        let plain = Kernel {
+            k: 96,
+            r_max: 0.1,
+            r_start: 0.01,
+            shrink: 0.5,
+        };
+        for kernel in [plain, Kernel::adaptive(96, 0.1, 0.01, 0.5)] {
+            out.fill(0.0);
+            let est = sparse.estimate(&grid, Vec3::ZERO, Vec3::Z, kernel, &mut found, &mut out);
+            assert!((est.r - 0.05).abs() < 1e-6, "{kernel:?}: {est:?}");
+            assert_eq!(
+                out[0], 1.0,
+                "{kernel:?}: only the photon at 0.049 is summed"
+            );
+        }
     }
 }

@@ -589,19 +589,27 @@ impl RenderSession {
         let shrink = radius_sq_factor.sqrt() as f32;
         let typical_global = r1_global.unwrap_or_else(fallback);
         let typical_caustic = r1_caustic.unwrap_or(typical_global);
-        let kernel = |fixed: Option<f32>, k: usize, typical: f32, cap: f32| match fixed {
-            Some(r) => Kernel {
-                k: 0,
-                r_max: r,
-                r_start: r,
-                shrink,
-            },
-            None => Kernel {
-                k,
-                r_max: cap.max(1e-6 * diag),
-                r_start: 1.2 * typical,
-                shrink,
-            },
+        // The caustic map's late-pass searches are folded (`Kernel::adaptive`: the same
+        // expected estimate from a third of the neighbours); the global map's are not, as
+        // folding them cost 0.25 dB at 48 passes on the prism for 8 % of the time, a loss
+        // per second (BENCHMARKS.md, session 14).
+        let kernel = |fixed: Option<f32>, k: usize, typical: f32, cap: f32, fold: bool| {
+            let (r_max, r_start) = (cap.max(1e-6 * diag), 1.2 * typical);
+            match fixed {
+                Some(r) => Kernel {
+                    k: 0,
+                    r_max: r,
+                    r_start: r,
+                    shrink,
+                },
+                None if fold => Kernel::adaptive(k, r_max, r_start, shrink),
+                None => Kernel {
+                    k,
+                    r_max,
+                    r_start,
+                    shrink,
+                },
+            }
         };
         // Caps: dim regions of the global map need far more than the median radius (a
         // spot-lit scene's median is set by the spot); caustics stay sharp with a tight cap.
@@ -611,12 +619,14 @@ impl RenderSession {
             self.settings.global_k,
             typical_global,
             (GLOBAL_CAP_TYPICAL * typical_global).max(GLOBAL_CAP_DIAGONAL * diag),
+            false,
         );
         let caustic = kernel(
             self.settings.caustic_radius,
             self.settings.caustic_neighbours(),
             typical_caustic,
             CAUSTIC_CAP_TYPICAL * typical_caustic,
+            true,
         );
         let typical = (typical_global * shrink, typical_caustic * shrink);
         ((r1_global, r1_caustic), (global, caustic), typical)
