@@ -12,7 +12,7 @@ use crate::materials::{
 };
 use crate::photon::trace::micro_sample;
 use crate::photon::{IrradianceCache, Kernel, PhotonMap};
-use crate::sampling::{Purpose, Rng, cosine_hemisphere, r2, sobol02};
+use crate::sampling::{Purpose, Rng, cosine_hemisphere, kronecker, r2, sobol02};
 use crate::scene::{SpectralScene, SurfaceKind, path_eta};
 use crate::spectral::spd;
 
@@ -585,9 +585,7 @@ fn within_unit(x: f32) -> f32 {
 /// (test `a_pixels_wavelengths_cover_the_spectrum_evenly_and_follow_no_other_sequence`).
 #[inline]
 fn spectral_point(i: u32, offset: f32) -> f32 {
-    const A: f64 = std::f64::consts::SQRT_2 - 1.0;
-    let v = ((offset as f64 + i as f64 * A).fract()) as f32;
-    if v < 1.0 { v } else { 0.0 }
+    kronecker(i, std::f64::consts::SQRT_2 - 1.0, offset)
 }
 
 /// Point `i` of a 2-D Kronecker sequence rotated by `offset`, for the camera ray's
@@ -598,11 +596,7 @@ fn spectral_point(i: u32, offset: f32) -> f32 {
 #[inline]
 fn pixel_jitter(i: u32, offset: [f32; 2]) -> [f32; 2] {
     const A: [f64; 2] = [0.628_706_721_037_808_6, 0.538_597_257_223_610_1];
-    let f = |a: f64, o: f32| {
-        let v = ((o as f64 + i as f64 * a).fract()) as f32;
-        if v < 1.0 { v } else { 0.0 }
-    };
-    [f(A[0], offset[0]), f(A[1], offset[1])]
+    [kronecker(i, A[0], offset[0]), kronecker(i, A[1], offset[1])]
 }
 
 #[cfg(test)]

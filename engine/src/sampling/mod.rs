@@ -98,11 +98,17 @@ pub fn sobol02(i: u32, scramble: [u32; 2]) -> [f32; 2] {
 #[inline]
 pub fn r2(i: u32, offset: [f32; 2]) -> [f32; 2] {
     const A: [f64; 2] = [0.754_877_666_246_692_8, 0.569_840_290_998_053_3];
-    let f = |a: f64, o: f32| {
-        let v = ((o as f64 + i as f64 * a).fract()) as f32;
-        if v < 1.0 { v } else { 0.0 }
-    };
-    [f(A[0], offset[0]), f(A[1], offset[1])]
+    [kronecker(i, A[0], offset[0]), kronecker(i, A[1], offset[1])]
+}
+
+/// Point `i` of the 1-D Kronecker sequence of irrational `step` rotated by `offset`
+/// (Cranley–Patterson): frac(offset + i·step), summed in f64 so that late points keep
+/// their spacing, and kept in [0, 1) after rounding to f32. The coordinate every rotated
+/// Kronecker sequence here ([`r2`], the pixel's and the wavelength's) is built from.
+#[inline]
+pub fn kronecker(i: u32, step: f64, offset: f32) -> f32 {
+    let v = ((offset as f64 + i as f64 * step).fract()) as f32;
+    if v < 1.0 { v } else { 0.0 }
 }
 
 /// An orthonormal basis around unit `n` (Duff et al. 2017), returned as (t, b).
