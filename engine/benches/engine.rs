@@ -9,6 +9,7 @@ use prismap_engine::photon::record::oct_decode;
 use prismap_engine::photon::{
     IrradianceCache, Kernel, PhotonMap, PhotonSettings, Storage, trace_photons,
 };
+use prismap_engine::render::RenderSettings;
 use prismap_engine::render::session::{PRECOMPUTE_EVERY, next_radius_sq_factor};
 use prismap_engine::sampling::{Purpose, Rng, uniform_sphere};
 use prismap_engine::scene::{SpectralScene, load_builtin};
@@ -228,7 +229,7 @@ fn irradiance_lookups(bencher: Bencher, storage: Storage) {
 /// map, the 96 nearest (24 × the caustic factor) searched from 1.2 typical radii out to
 /// the same cap. Queried at 2 000 caustic photons on their own surfaces, i.e. only where
 /// the search runs (on the prism most camera hits end at the occupancy test instead).
-/// At pass 1 (no shrink) and pass 32 (the radius shrunk by Knaus–Zwicker's α = 2/3, the
+/// At pass 1 (no shrink) and pass 32 (the radius shrunk by the default Knaus–Zwicker α, the
 /// search folded as the renderer folds it: `Kernel::adaptive`).
 #[divan::bench(args = [1, 32], sample_count = 10)]
 fn caustic_estimates(bencher: Bencher, pass: u64) {
@@ -243,7 +244,8 @@ fn caustic_estimates(bencher: Bencher, pass: u64) {
         .expect("the prism has a caustic map");
     let k = 96;
     let r = map.typical_knn_radius(k, 256).unwrap();
-    let factor = (1..pass).fold(1.0, |f, p| next_radius_sq_factor(f, p, 2.0 / 3.0));
+    let alpha = RenderSettings::default().alpha;
+    let factor = (1..pass).fold(1.0, |f, p| next_radius_sq_factor(f, p, alpha));
     let kernel = Kernel::adaptive(k, 1.2 * r, 1.2 * r, factor.sqrt() as f32);
     let points = photon_queries(&map, map.len() / 2000, 2000);
     bench_estimates(bencher, &scene.grid, &map, kernel, &points);

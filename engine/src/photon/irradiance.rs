@@ -256,20 +256,15 @@ impl IrradianceCache {
 mod tests {
     use super::*;
     use crate::photon::PhotonBatch;
+    use crate::photon::map::tests::uniform_unit_square;
     use crate::sampling::{Purpose, Rng};
 
     #[test]
     fn uniform_photons_give_their_irradiance_at_every_lookup() {
-        // 40 000 photons of flux 1e-4 uniform on the unit square: E = 4 per unit area.
+        // E = 4 per unit area.
         let grid = BinGrid::with_bins(4).unwrap();
         for record in [Record::Full, Record::Compact] {
-            let mut b = PhotonBatch::new(record, &grid);
-            let mut rng = Rng::stream(2, 0, 0, Purpose::Photon);
-            for _ in 0..40_000 {
-                let [x, y] = rng.next_2d();
-                b.push(&grid, Vec3::new(x, y, 0.0), Vec3::Z, &[1e-4; 4]);
-            }
-            let map = PhotonMap::build(b);
+            let map = uniform_unit_square(&grid, record, 2);
             let kernel = Kernel {
                 k: 64,
                 r_max: 0.2,

@@ -645,7 +645,7 @@ impl PhotonMap {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -769,17 +769,22 @@ mod tests {
         assert_eq!(one, got);
     }
 
-    #[test]
-    fn a_folded_kernel_estimates_what_the_unfolded_one_does_from_fewer_neighbours() {
-        // 40 000 photons of flux 1e-4 uniform on the unit square: E = 4 per unit area.
-        let grid = BinGrid::with_bins(4).unwrap();
-        let mut b = PhotonBatch::new(Record::Full, &grid);
-        let mut rng = crate::sampling::Rng::stream(5, 0, 0, crate::sampling::Purpose::Photon);
+    /// 40 000 photons of flux 1e-4 (4 bins) uniform on the unit square, facing +z, from
+    /// stream `seed`: irradiance E = 4 per unit area.
+    pub(crate) fn uniform_unit_square(grid: &BinGrid, record: Record, seed: u64) -> PhotonMap {
+        let mut b = PhotonBatch::new(record, grid);
+        let mut rng = crate::sampling::Rng::stream(seed, 0, 0, crate::sampling::Purpose::Photon);
         for _ in 0..40_000 {
             let [x, y] = rng.next_2d();
-            b.push(&grid, Vec3::new(x, y, 0.0), Vec3::Z, &[1e-4; 4]);
+            b.push(grid, Vec3::new(x, y, 0.0), Vec3::Z, &[1e-4; 4]);
         }
-        let map = PhotonMap::build(b);
+        PhotonMap::build(b)
+    }
+
+    #[test]
+    fn a_folded_kernel_estimates_what_the_unfolded_one_does_from_fewer_neighbours() {
+        let grid = BinGrid::with_bins(4).unwrap();
+        let map = uniform_unit_square(&grid, Record::Full, 5);
         let (mut found, mut out) = (Vec::new(), vec![0.0; 4]);
         for shrink in [1.0f32, 0.8, 0.5, 0.3] {
             let plain = Kernel {

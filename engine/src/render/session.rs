@@ -591,8 +591,8 @@ impl RenderSession {
         let typical_caustic = r1_caustic.unwrap_or(typical_global);
         // The caustic map's late-pass searches are folded (`Kernel::adaptive`: the same
         // expected estimate from a third of the neighbours); the global map's are not, as
-        // folding them cost 0.25 dB at 48 passes on the prism for 8 % of the time, a loss
-        // per second (BENCHMARKS.md, session 14).
+        // folding them saved 6–8 % of the time on the prism but cost 0.25 dB at 48
+        // passes, no gain per second (BENCHMARKS.md, session 14).
         let kernel = |fixed: Option<f32>, k: usize, typical: f32, cap: f32, fold: bool| {
             let (r_max, r_start) = (cap.max(1e-6 * diag), 1.2 * typical);
             match fixed {
