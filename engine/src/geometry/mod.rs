@@ -1,7 +1,9 @@
 //! Rays, triangles and the `obvhs` CWBVH that finds them.
 
 use glam::{Vec3, Vec3A};
-use obvhs::{BvhBuildParams, cwbvh::CwBvh, ray::RayHit, triangle::Triangle};
+use obvhs::{
+    BvhBuildParams, cwbvh::CwBvh, ray::RayHit, rt_triangle::RtTriangle, triangle::Triangle,
+};
 use std::time::Duration;
 
 /// A hit: distance along the ray and the index of the triangle (in scene order).
@@ -143,8 +145,11 @@ impl SurfaceHit {
 /// The scene's triangles in a compressed wide BVH (obvhs' CWBVH, medium build).
 pub struct Accel {
     bvh: CwBvh,
-    /// Triangles in BVH leaf order (so leaves index them directly).
-    tris: Vec<Triangle>,
+    /// Triangles in BVH leaf order (so leaves index them directly), with their edges and
+    /// normal precomputed: `RtTriangle::intersect` is `Triangle::intersect`'s arithmetic
+    /// (e1 = v0 − v1, e2 = v2 − v0, n = e1 × e2) without recomputing them per test, so the
+    /// same hits to the bit.
+    tris: Vec<RtTriangle>,
     /// BVH order → scene triangle index.
     ids: Vec<u32>,
     /// Scene bounds' diagonal length, for ray offsets.
@@ -189,7 +194,10 @@ impl Accel {
             &mut Duration::default(),
         );
         let ids = bvh.primitive_indices.clone();
-        let tris = ids.iter().map(|&i| input[i as usize]).collect();
+        let tris = ids
+            .iter()
+            .map(|&i| RtTriangle::from(&input[i as usize]))
+            .collect();
         Self {
             bvh,
             tris,
@@ -251,7 +259,7 @@ impl Accel {
     pub fn memory_bytes(&self) -> usize {
         self.bvh.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
             + self.bvh.primitive_indices.len() * 4
-            + self.tris.len() * std::mem::size_of::<Triangle>()
+            + self.tris.len() * std::mem::size_of::<RtTriangle>()
             + self.ids.len() * 4
     }
 }
