@@ -34,7 +34,14 @@ pub struct Gather<'a> {
     pub camera_samples: u32,
     /// Safety cap on a path's specular bounces (Russian roulette ends paths first).
     pub max_bounces: u32,
+    /// How far from the pixel's caustic estimate, as a fraction of its radius, another
+    /// of the pixel's camera samples on the same surface reads it instead of estimating
+    /// anew ([`CAUSTIC_REUSE`]; 0: every sample estimates its own).
+    pub caustic_reuse: f32,
 }
+
+/// [`Gather::caustic_reuse`]'s value.
+pub const CAUSTIC_REUSE: f32 = 0.5;
 
 /// Per-thread buffers of N bins (the result never depends on their prior content).
 pub struct Scratch {
@@ -52,6 +59,11 @@ pub struct Scratch {
     /// next pixel's search starts there. Reset per row so that results never depend on
     /// which thread rendered what.
     hints: [f32; 2],
+    /// The pixel's caustic estimate so far in this pass: where it was made (point,
+    /// normal, radius) and its irradiance (N bins, in `caustic_e`); see
+    /// [`Gather::caustic_irradiance`]. Cleared per pixel.
+    caustic_at: Option<(Vec3, Vec3, f32)>,
+    caustic_e: Vec<f32>,
 }
 
 /// What one final-gather ray works in.
@@ -78,12 +90,19 @@ impl Scratch {
             found: Vec::new(),
             refl: Vec::new(),
             hints: [0.0; 2],
+            caustic_at: None,
+            caustic_e: vec![0.0; n],
         }
     }
 
     /// Forgets the radius hints: call at the start of every deterministic work unit.
     pub fn start_row(&mut self) {
         self.hints = [0.0; 2];
+    }
+
+    /// Forgets the pixel's caustic estimate (a new pixel's samples share only theirs).
+    fn start_pixel(&mut self) {
+        self.caustic_at = None;
     }
 }
 
@@ -143,6 +162,7 @@ impl Gather<'_> {
         out: &mut [f32],
     ) {
         out.fill(0.0);
+        s.start_pixel();
         let samples = self.camera_samples.max(1);
         // One tangent for the pixel's rays (a libm call each was 1 % of a prism render).
         let camera = &self.scene.camera;
@@ -333,9 +353,8 @@ impl Gather<'_> {
         spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
         // Caustics from the caustic map (irradiance, like the other two terms).
         if let Some(cm) = self.caustic {
-            let kernel = self.caustic_kernel;
-            self.density(cm, p, nf, kernel, &mut s.hints[1], &mut s.found, &mut s.tmp);
-            spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
+            self.caustic_irradiance(cm, p, nf, s);
+            spd::add_scaled(&mut s.acc, &s.caustic_e, 1.0);
         }
         // Indirect light: final gather. Cosine sampling makes each ray's weight ρ, i.e.
         // irradiance π·mean(L), so it joins the other irradiance terms. The pixel's rays
@@ -389,7 +408,7 @@ impl Gather<'_> {
                         None => {
                             let mut hint = 0.0;
                             let kernel = self.global_kernel;
-                            self.density(self.global, p, nf, kernel, &mut hint, found, out)
+                            self.density(self.global, p, nf, kernel, &mut hint, found, out);
                         }
                     }
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
@@ -490,9 +509,41 @@ impl Gather<'_> {
         (spd::max(t) > 0.0).then_some(next)
     }
 
+    /// The caustic map's irradiance at `p` (facing `nf`) into `s.caustic_e`. A pixel's
+    /// camera samples lie within a pixel of each other, and where the caustic estimate's
+    /// radius spans several pixels their estimates sum nearly the same photons: a sample
+    /// whose hit lies on the same surface within [`CAUSTIC_REUSE`] of the radius of the
+    /// pixel's estimate so far reads that estimate instead of searching again. The sample
+    /// that made it is a point of the pixel's own low-discrepancy sequence, spread over
+    /// the pixel as the passes go on, so the pixel still averages the estimate over its
+    /// area; only its spread within one pass is lost, which the kernel's width (at least
+    /// twice the offsets shared across) makes small. At one camera sample a pixel, or where
+    /// the radius is under two pixels' footprint, every sample estimates its own as before.
+    fn caustic_irradiance(&self, cm: &PhotonMap, p: Vec3, nf: Vec3, s: &mut Scratch) {
+        if let Some((p0, n0, r0)) = s.caustic_at {
+            let d = p - p0;
+            let (d2, h) = (d.length_squared(), d.dot(n0));
+            let reach = self.caustic_reuse * r0;
+            if d2 <= reach * reach && h * h <= d2 / 64.0 + 1e-12 && nf.dot(n0) >= 0.999 {
+                return;
+            }
+        }
+        let kernel = self.caustic_kernel;
+        let r = self.density(
+            cm,
+            p,
+            nf,
+            kernel,
+            &mut s.hints[1],
+            &mut s.found,
+            &mut s.caustic_e,
+        );
+        s.caustic_at = Some((p, nf, r));
+    }
+
     /// A density estimate of irradiance (N bins, Σ flux / (π r²)) into `out`, its search starting at `hint`
     /// (the previous estimate's k-nearest radius; 0 for the kernel's own start), which it
-    /// updates.
+    /// updates. Returns the radius it divided by.
     #[allow(clippy::too_many_arguments)]
     fn density(
         &self,
@@ -503,13 +554,14 @@ impl Gather<'_> {
         hint: &mut f32,
         found: &mut Vec<(f32, u32)>,
         out: &mut [f32],
-    ) {
+    ) -> f32 {
         out.fill(0.0);
         let kernel = kernel.starting_at(*hint);
         let e = map.estimate(&self.scene.grid, p, nf, kernel, found, out);
         *hint = e.r_k;
         let r = e.r.max(self.r_min);
         spd::scale(out, 1.0 / (std::f32::consts::PI * r * r));
+        r
     }
 }
 
@@ -737,5 +789,89 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_pixels_samples_share_its_caustic_estimate_only_on_its_surface_within_reach() {
+        // Uniform caustic photons on z = 0 (E = 4): an estimate at p0 is shared by a hit
+        // within half its radius on the same plane and side, and made anew beyond that,
+        // on a perpendicular wall through the same point, on a parallel surface a small
+        // gap above, and in the next pixel.
+        use crate::photon::map::tests::uniform_unit_square;
+        use crate::photon::record::Record;
+        use crate::scene::load_builtin;
+        use crate::spectral::BinGrid;
+        let grid = BinGrid::with_bins(4).unwrap();
+        let scene = SpectralScene::new(&load_builtin("prism").unwrap(), grid.clone());
+        let map = uniform_unit_square(&grid, Record::Full, 4);
+        let empty = PhotonMap::build(crate::photon::PhotonBatch::new(Record::Full, &grid));
+        let kernel = Kernel {
+            k: 48,
+            r_max: 0.2,
+            r_start: 0.03,
+            shrink: 1.0,
+        };
+        let gather = Gather {
+            scene: &scene,
+            global: &empty,
+            caustic: Some(&map),
+            irradiance: None,
+            global_kernel: kernel,
+            caustic_kernel: kernel,
+            r_min: 1e-6,
+            final_gather_rays: 4,
+            camera_samples: 4,
+            max_bounces: 16,
+            caustic_reuse: CAUSTIC_REUSE,
+        };
+        let mut s = Scratch::new(4);
+        let p0 = Vec3::new(0.5, 0.5, 0.0);
+        gather.caustic_irradiance(&map, p0, Vec3::Z, &mut s);
+        let (_, _, r0) = s.caustic_at.unwrap();
+        // About √(47/(4π)) ≈ 0.019 for 48 photons at 40 000 per unit area.
+        assert!((0.012..0.03).contains(&r0), "{r0}");
+        let e0 = s.caustic_e.clone();
+        assert!((e0[0] / 4.0 - 1.0).abs() < 0.35, "{e0:?}");
+        let made_at = |s: &Scratch| s.caustic_at.unwrap().0;
+        // Same plane, within reach: shared (the estimate and where it was made unchanged).
+        let near = p0 + Vec3::new(0.45 * r0, 0.0, 0.0);
+        gather.caustic_irradiance(&map, near, Vec3::Z, &mut s);
+        assert_eq!((made_at(&s), &s.caustic_e), (p0, &e0));
+        // A normal tilted 0.03 rad still counts as the same surface.
+        let tilted = |t: f32| Vec3::new(0.0, t, 1.0).normalize();
+        let beside = p0 + Vec3::new(0.2 * r0, 0.0, 0.0);
+        gather.caustic_irradiance(&map, beside, tilted(0.03), &mut s);
+        assert_eq!((made_at(&s), &s.caustic_e), (p0, &e0));
+        // Each of these makes its own estimate, after a fresh one at p0.
+        let own = [
+            (p0 + Vec3::new(0.55 * r0, 0.0, 0.0), Vec3::Z, "beyond reach"),
+            (beside, Vec3::X, "a perpendicular wall"),
+            (beside, tilted(0.05), "a 0.05 rad tilt"),
+            (beside, -Vec3::Z, "the other side"),
+            (
+                beside + Vec3::new(0.0, 0.0, 0.1 * r0),
+                Vec3::Z,
+                "a surface 0.1 r above",
+            ),
+        ];
+        for (p, n, what) in own {
+            s.start_pixel();
+            gather.caustic_irradiance(&map, p0, Vec3::Z, &mut s);
+            gather.caustic_irradiance(&map, p, n, &mut s);
+            assert_eq!(made_at(&s), p, "{what}: shared the estimate at p0");
+        }
+        // A new pixel estimates anew even at the same point.
+        s.start_pixel();
+        gather.caustic_irradiance(&map, near, Vec3::Z, &mut s);
+        assert_eq!(made_at(&s), near);
+        // With sharing off every sample estimates its own.
+        let unshared = Gather {
+            caustic_reuse: 0.0,
+            ..gather
+        };
+        s.start_pixel();
+        unshared.caustic_irradiance(&map, p0, Vec3::Z, &mut s);
+        unshared.caustic_irradiance(&map, near, Vec3::Z, &mut s);
+        assert_eq!(made_at(&s), near);
     }
 }
