@@ -9,19 +9,48 @@ use crate::spectral::color::{SRGB_TO_XYZ, mul3, srgb_encode};
 /// Infinite for identical images.
 pub fn psnr(a: &Image, b: &Image, exposure: f32) -> Result<f64, SizeMismatch> {
     same_size(a, b)?;
-    let mut sse = 0.0f64;
-    for (p, q) in a.pixels.iter().zip(&b.pixels) {
-        for c in 0..3 {
-            let d = srgb_encode(p[c] * exposure) as f64 - srgb_encode(q[c] * exposure) as f64;
-            sse += d * d / 3.0;
-        }
-    }
-    let mn = a.pixels.len() as f64;
-    Ok(if sse == 0.0 {
+    Ok(psnr_of_pairs(
+        a.pixels.len(),
+        |i| (a.pixels[i], b.pixels[i]),
+        exposure,
+    ))
+}
+
+/// Pixels whose squared display differences are summed in a row (in order) before the
+/// chunks' sums are added up in order: the same bits on any thread count.
+const SSE_CHUNK: usize = 4096;
+
+/// [`psnr`] of `n` pixel pairs given by `pair` (so a caller compares images it never
+/// builds, such as a film's two halves). The sRGB encoding, six `powf` a pixel, is
+/// spread over the thread pool in fixed chunks.
+pub fn psnr_of_pairs(
+    n: usize,
+    pair: impl Fn(usize) -> ([f32; 3], [f32; 3]) + Sync,
+    exposure: f32,
+) -> f64 {
+    use rayon::prelude::*;
+    let chunks = n.div_ceil(SSE_CHUNK);
+    let sums: Vec<f64> = (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let mut sse = 0.0f64;
+            for i in c * SSE_CHUNK..((c + 1) * SSE_CHUNK).min(n) {
+                let (p, q) = pair(i);
+                for c in 0..3 {
+                    let d =
+                        srgb_encode(p[c] * exposure) as f64 - srgb_encode(q[c] * exposure) as f64;
+                    sse += d * d / 3.0;
+                }
+            }
+            sse
+        })
+        .collect();
+    let sse: f64 = sums.iter().sum();
+    if sse == 0.0 {
         f64::INFINITY
     } else {
-        10.0 * (mn / sse).log10()
-    })
+        10.0 * (n as f64 / sse).log10()
+    }
 }
 
 /// Two images compared pixel by pixel differ in size (e.g. a user's reference image).
@@ -262,6 +291,33 @@ mod tests {
         };
         assert_eq!(psnr(&img(0.5), &wide, 1.0), Err(SizeMismatch(1, 1, 2, 1)));
         assert!(de2000_stats(&wide, &img(0.5), 1.0).is_err());
+    }
+
+    #[test]
+    fn psnr_counts_every_pixel_of_every_chunk_the_same_on_any_thread_count() {
+        // 3 chunks and a part: one pixel off by 0.1 in display space in the last, partial
+        // chunk gives MSE 0.01 / n; a chunk boundary dropped or doubled would move it.
+        let n = 3 * SSE_CHUNK + 17;
+        let a = Image {
+            width: n as u32,
+            height: 1,
+            pixels: vec![[0.0; 3]; n],
+        };
+        let mut b = a.clone();
+        b.pixels[n - 1] = [crate::spectral::color::srgb_decode(0.1); 3];
+        b.pixels[SSE_CHUNK] = [crate::spectral::color::srgb_decode(0.1); 3];
+        let expect = 10.0 * (n as f64 / (2.0 * 0.01)).log10();
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| psnr(&a, &b, 1.0).unwrap())
+        };
+        let one = on(1);
+        assert!((one - expect).abs() < 1e-3, "{one} against {expect}");
+        assert_eq!(one.to_bits(), on(2).to_bits());
+        assert_eq!(one.to_bits(), on(5).to_bits());
     }
 
     #[test]
