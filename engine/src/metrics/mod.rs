@@ -32,9 +32,9 @@ pub fn psnr_of_pairs(
     let chunks = n.div_ceil(SSE_CHUNK);
     let sums: Vec<f64> = (0..chunks)
         .into_par_iter()
-        .map(|c| {
+        .map(|chunk| {
             let mut sse = 0.0f64;
-            for i in c * SSE_CHUNK..((c + 1) * SSE_CHUNK).min(n) {
+            for i in chunk * SSE_CHUNK..((chunk + 1) * SSE_CHUNK).min(n) {
                 let (p, q) = pair(i);
                 for c in 0..3 {
                     let d =
@@ -295,8 +295,9 @@ mod tests {
 
     #[test]
     fn psnr_counts_every_pixel_of_every_chunk_the_same_on_any_thread_count() {
-        // 3 chunks and a part: one pixel off by 0.1 in display space in the last, partial
-        // chunk gives MSE 0.01 / n; a chunk boundary dropped or doubled would move it.
+        // 3 chunks and a part: two pixels off by 0.1 in display space, the first of the
+        // second chunk and the last of the partial one, give MSE 2 · 0.01 / n; a chunk's
+        // edge dropped or counted twice would move it.
         let n = 3 * SSE_CHUNK + 17;
         let a = Image {
             width: n as u32,
