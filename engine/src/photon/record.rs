@@ -319,8 +319,16 @@ pub fn oct_encode(d: Vec3) -> u32 {
         u = (1.0 - pv.abs()) * pu.signum();
         v = (1.0 - pu.abs()) * pv.signum();
     }
-    let q = |x: f32| (((x.clamp(-1.0, 1.0) * 0.5 + 0.5) * 65535.0).round() as u32) & 0xFFFF;
+    let q = |x: f32| round_unit16((x.clamp(-1.0, 1.0) * 0.5 + 0.5) * 65535.0);
     q(u) | (q(v) << 16)
+}
+
+/// `w.round() as u32 & 0xFFFF` for `w` in [0, 65535] (and 0 for NaN) without the libm
+/// call `round` compiles to on baseline x86-64: w + ½ is exact in f64 and, being
+/// non-negative, truncates to the same integer as rounding half away from zero.
+#[inline]
+fn round_unit16(w: f32) -> u32 {
+    ((w as f64 + 0.5) as u32) & 0xFFFF
 }
 
 pub fn oct_decode(e: u32) -> Vec3 {
@@ -355,6 +363,21 @@ pub fn oct_within(e: u32, n: Vec3, min_cos: f32) -> bool {
 mod tests {
     use super::*;
     use crate::sampling::{Purpose, Rng, uniform_sphere};
+
+    #[test]
+    fn the_quantiser_rounds_as_f32_round_does() {
+        // Every value a half apart over the range, the halves' neighbours, and NaN.
+        let mut check = |w: f32| assert_eq!(round_unit16(w), (w.round() as u32) & 0xFFFF, "{w}");
+        for i in 0..=2 * 65535u32 {
+            let w = i as f32 * 0.5;
+            check(w);
+            check(f32::from_bits(w.to_bits() + 1));
+            if w > 0.0 {
+                check(f32::from_bits(w.to_bits() - 1));
+            }
+        }
+        check(f32::NAN);
+    }
 
     #[test]
     fn spike_round_trip_is_exact_for_every_bin_and_amplitude() {
