@@ -320,3 +320,23 @@ fn compact_decode(bencher: Bencher, n: usize) {
             out[0]
         });
 }
+
+/// The kd order of 200 000 photon positions of the Cornell box (four passes' global maps
+/// of 50 000 photons), on all threads: the build every photon pass ends with.
+#[divan::bench(sample_count = 20)]
+fn kd_build(bencher: Bencher) {
+    let scene = cornell(4);
+    let settings = photon_settings(50_000, Storage::Compact, 1);
+    let cancel = AtomicBool::new(false);
+    let positions: Vec<[f32; 3]> = (1..=4)
+        .flat_map(|pass| {
+            let maps = trace_photons(&scene, &settings, 1, pass, &cancel).unwrap();
+            maps.global.positions().to_vec()
+        })
+        .collect();
+    bencher.counter(ItemsCount::new(positions.len())).bench(|| {
+        prismap_engine::photon::kdtree::build_order(black_box(&positions))
+            .1
+            .len()
+    });
+}

@@ -28,18 +28,37 @@ fn offset_dist2(p: [f32; 3], q: [f32; 3]) -> ([f32; 3], f32) {
     (d, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 }
 
+/// `x`'s place in `f32::total_cmp`'s order as an unsigned key: keys compare as the
+/// floats do under `total_cmp` (−NaN < −∞ < … < −0 < +0 < … < +∞ < NaN).
+#[inline(always)]
+fn order_key(x: f32) -> u32 {
+    let b = x.to_bits();
+    // total_cmp's own flip of the magnitude bits of negatives, then the sign flipped so
+    // that the signed order becomes the unsigned one.
+    (b ^ ((((b as i32) >> 31) as u32) >> 1)) ^ 0x8000_0000
+}
+
+/// The float of an [`order_key`].
+#[inline(always)]
+fn from_order_key(k: u32) -> f32 {
+    let b = k ^ 0x8000_0000;
+    f32::from_bits(b ^ ((((b as i32) >> 31) as u32) >> 1))
+}
+
 /// Computes the kd order: returns (permutation, axis per position in the new order).
 pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
     // Points travel with their index (16 bytes each), so the selections compare memory
-    // they already hold instead of chasing an index per comparison.
-    let mut items: Vec<([f32; 3], u32)> = positions
+    // they already hold instead of chasing an index per comparison; coordinates as
+    // `order_key`s, so that a comparison (coordinate, then index: ties split by count) is
+    // one 64-bit integer comparison.
+    let mut items: Vec<([u32; 3], u32)> = positions
         .iter()
         .enumerate()
-        .map(|(i, p)| (*p, i as u32))
+        .map(|(i, p)| (p.map(order_key), i as u32))
         .collect();
     let mut axes = vec![0u8; positions.len()];
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-    for (p, _) in &items {
+    for p in positions {
         for a in 0..3 {
             lo[a] = lo[a].min(p[a]);
             hi[a] = hi[a].max(p[a]);
@@ -51,7 +70,7 @@ pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
 
 /// Splits `items` at its median along the longest axis of `bounds` (the parent's box cut
 /// at the parent's split: no rescan of the points per node).
-fn build(items: &mut [([f32; 3], u32)], axes: &mut [u8], bounds: ([f32; 3], [f32; 3])) {
+fn build(items: &mut [([u32; 3], u32)], axes: &mut [u8], bounds: ([f32; 3], [f32; 3])) {
     let n = items.len();
     if n <= LEAF {
         return;
@@ -66,11 +85,9 @@ fn build(items: &mut [([f32; 3], u32)], axes: &mut [u8], bounds: ([f32; 3], [f32
         2
     };
     let mid = n / 2;
-    items.select_nth_unstable_by(mid, |a, b| {
-        a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1))
-    });
+    items.select_nth_unstable_by_key(mid, |a| ((a.0[axis] as u64) << 32) | a.1 as u64);
     axes[mid] = axis as u8;
-    let split = items[mid].0[axis];
+    let split = from_order_key(items[mid].0[axis]);
     let (mut left_hi, mut right_lo) = (hi, lo);
     left_hi[axis] = split;
     right_lo[axis] = split;
@@ -366,6 +383,109 @@ mod tests {
             .iter()
             .filter(|q| (Vec3::from_array(**q) - p).length_squared() <= r2)
             .count()
+    }
+
+    #[test]
+    fn order_keys_order_as_total_cmp_and_invert() {
+        let specials = [
+            f32::NEG_INFINITY,
+            -f32::MAX,
+            -1.0,
+            -f32::MIN_POSITIVE,
+            -1e-45,
+            -0.0,
+            0.0,
+            1e-45,
+            f32::MIN_POSITIVE,
+            1.0,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NAN,
+            -f32::NAN,
+        ];
+        let mut rng = Rng::stream(5, 0, 0, Purpose::Photon);
+        let xs: Vec<f32> = specials
+            .into_iter()
+            .chain((0..2000).map(|_| f32::from_bits(rng.next_u32())))
+            .collect();
+        for &a in &xs {
+            assert_eq!(from_order_key(order_key(a)).to_bits(), a.to_bits());
+            for &b in &xs[..64] {
+                assert_eq!(order_key(a).cmp(&order_key(b)), a.total_cmp(&b), "{a} {b}");
+            }
+        }
+    }
+
+    /// The build before the keys (kept as the reference): selections by `total_cmp`, ties
+    /// by index.
+    fn reference_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
+        fn build(items: &mut [([f32; 3], u32)], axes: &mut [u8], (lo, hi): ([f32; 3], [f32; 3])) {
+            let n = items.len();
+            if n <= LEAF {
+                return;
+            }
+            let ext = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+            let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
+                0
+            } else if ext[1] >= ext[2] {
+                1
+            } else {
+                2
+            };
+            let mid = n / 2;
+            items.select_nth_unstable_by(mid, |a, b| {
+                a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1))
+            });
+            axes[mid] = axis as u8;
+            let split = items[mid].0[axis];
+            let (mut left_hi, mut right_lo) = (hi, lo);
+            left_hi[axis] = split;
+            right_lo[axis] = split;
+            let (left, rest) = items.split_at_mut(mid);
+            let (al, arest) = axes.split_at_mut(mid);
+            build(left, al, (lo, left_hi));
+            build(&mut rest[1..], &mut arest[1..], (right_lo, hi));
+        }
+        let mut items: Vec<_> = positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (*p, i as u32))
+            .collect();
+        let mut axes = vec![0u8; positions.len()];
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for p in positions {
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        build(&mut items, &mut axes, (lo, hi));
+        (items.iter().map(|it| it.1).collect(), axes)
+    }
+
+    #[test]
+    fn the_keyed_build_orders_exactly_as_the_comparison_build() {
+        // Spread points, points on a grid of few values (many ties, ±0), and enough of
+        // them for the parallel split.
+        let mut rng = Rng::stream(9, 0, 0, Purpose::Photon);
+        let spread: Vec<[f32; 3]> = (0..3000)
+            .map(|_| {
+                [
+                    rng.next_f32() - 0.5,
+                    100.0 * rng.next_f32(),
+                    -rng.next_f32(),
+                ]
+            })
+            .collect();
+        let ties: Vec<[f32; 3]> = (0..40_000u32)
+            .map(|i| {
+                let v = |k: u32| [-1.0, -0.0, 0.0, 0.5][(k % 4) as usize];
+                [v(i), v(i / 4), v(i / 16 + i % 3)]
+            })
+            .collect();
+        for points in [&spread, &ties] {
+            assert_eq!(build_order(points), reference_order(points));
+        }
     }
 
     #[test]
