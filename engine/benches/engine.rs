@@ -321,8 +321,9 @@ fn compact_decode(bencher: Bencher, n: usize) {
         });
 }
 
-/// The kd order of 200 000 photon positions of the Cornell box (four passes' global maps
-/// of 50 000 photons), on all threads: the build every photon pass ends with.
+/// The kd order of the Cornell box's global-map photon positions from four passes of
+/// 50 000 emitted photons (about 325 000 stored), on all threads: the build every photon
+/// pass ends with.
 #[divan::bench(sample_count = 20)]
 fn kd_build(bencher: Bencher) {
     let scene = cornell(4);

@@ -38,6 +38,9 @@ pub struct Gather<'a> {
     /// of the pixel's camera samples on the same surface reads it instead of estimating
     /// anew ([`CAUSTIC_REUSE`]; 0: every sample estimates its own).
     pub caustic_reuse: f32,
+    /// tan(yfov / 2) of the scene's camera ([`camera_tan_half_fov`]): once per pass, not
+    /// a libm call per pixel (1 % of a one-sample prism pass).
+    pub tan_half_fov: f32,
 }
 
 /// [`Gather::caustic_reuse`]'s value.
@@ -164,9 +167,8 @@ impl Gather<'_> {
         out.fill(0.0);
         s.start_pixel();
         let samples = self.camera_samples.max(1);
-        // One tangent for the pixel's rays (a libm call each was 1 % of a prism render).
         let camera = &self.scene.camera;
-        let tan_y = tan_half_fov(camera);
+        let tan_y = self.tan_half_fov;
         let mut first = fg.first;
         for k in 0..samples {
             let rays = fg.rays / samples + u32::from(k < fg.rays % samples);
@@ -568,11 +570,11 @@ impl Gather<'_> {
 /// The direction of camera `c`'s ray through image position (x, y) of a width × height
 /// image, in pixels (may be fractional).
 pub fn camera_dir(c: &crate::scene::Camera, x: f32, y: f32, width: u32, height: u32) -> Vec3 {
-    camera_dir_with(c, tan_half_fov(c), x, y, width, height)
+    camera_dir_with(c, camera_tan_half_fov(c), x, y, width, height)
 }
 
 /// tan(yfov / 2) of camera `c`, the factor [`camera_dir_with`] takes.
-fn tan_half_fov(c: &crate::scene::Camera) -> f32 {
+pub fn camera_tan_half_fov(c: &crate::scene::Camera) -> f32 {
     (0.5 * c.yfov).tan()
 }
 
@@ -823,6 +825,7 @@ mod tests {
             camera_samples: 4,
             max_bounces: 16,
             caustic_reuse: CAUSTIC_REUSE,
+            tan_half_fov: camera_tan_half_fov(&scene.camera),
         };
         let mut s = Scratch::new(4);
         let p0 = Vec3::new(0.5, 0.5, 0.0);

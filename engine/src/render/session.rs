@@ -394,6 +394,7 @@ impl RenderSession {
             camera_samples: self.settings.camera_samples,
             max_bounces: self.settings.max_bounces,
             caustic_reuse: self.caustic_reuse,
+            tan_half_fov: super::gather::camera_tan_half_fov(&self.scene.camera),
         };
         let next_factor = next_radius_sq_factor(self.radius_sq_factor, pass, self.settings.alpha);
         let (gathered, next) = if trace_next {
