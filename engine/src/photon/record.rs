@@ -367,7 +367,7 @@ mod tests {
     #[test]
     fn the_quantiser_rounds_as_f32_round_does() {
         // Every value a half apart over the range, the halves' neighbours, and NaN.
-        let mut check = |w: f32| assert_eq!(round_unit16(w), (w.round() as u32) & 0xFFFF, "{w}");
+        let check = |w: f32| assert_eq!(round_unit16(w), (w.round() as u32) & 0xFFFF, "{w}");
         for i in 0..=2 * 65535u32 {
             let w = i as f32 * 0.5;
             check(w);
