@@ -270,9 +270,22 @@ fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Ima
     .expect("valid settings");
     r.run(Stop::passes(passes), None, &mut |_, _| Flow::Continue)
         .expect("the reference renders");
+    // The cache only saves time: a folder it cannot write to is reported, not fatal
+    // (the reference just rendered is used either way).
     if let Some(path) = &cached {
-        prismap_engine::output::write_exr(path, &r.image())
-            .expect("the reference cache is writable");
+        let written = match path.parent() {
+            Some(dir) => std::fs::create_dir_all(dir).map_err(|e| e.to_string()),
+            None => Ok(()),
+        }
+        .and_then(|()| {
+            prismap_engine::output::write_exr(path, &r.image()).map_err(|e| e.to_string())
+        });
+        if let Err(e) = written {
+            eprintln!(
+                "warning: PRISMAP_BENCH_CACHE: cannot keep the reference as {}: {e}",
+                path.display()
+            );
+        }
     }
     (r.image(), t.elapsed().as_secs_f64())
 }

@@ -646,8 +646,11 @@ impl RenderSession {
         let rays = self.settings.final_gather_rays;
         let (cancel, probes, grid) = (&self.cancel, &self.probes, &self.scene.grid);
         let keep_all = self.spectra.is_some();
+        // One row per task: rayon otherwise cuts the rows into a few long runs, and when
+        // the costly rows (a caustic's) fall into one run its thread finishes alone.
         let rows: Vec<Option<PassImage>> = (0..h)
             .into_par_iter()
+            .with_max_len(1)
             .map_init(
                 || (Scratch::new(n), vec![0.0f32; n]),
                 |(scratch, radiance), y| {
