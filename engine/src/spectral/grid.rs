@@ -51,6 +51,8 @@ pub struct BinGrid {
     /// Wavelengths a bin's mean of a Jakob–Hanika texel is taken at, `per_bin` per bin
     /// with equal weights, bin after bin.
     texel_lambdas: Vec<f64>,
+    /// `texel_lambdas` on the sigmoid fit's own axis ([`super::jakob_hanika::t_of`]).
+    texel_ts: Vec<f64>,
     /// D65 normalised to Y = 1 at each of `texel_lambdas` (decoding a compact triplet).
     texel_d65: Vec<f64>,
     per_bin: usize,
@@ -100,6 +102,7 @@ impl BinGrid {
             smits: None,
             upsampling: Upsampling::default(),
             texel_lambdas: Vec::new(),
+            texel_ts: Vec::new(),
             texel_d65: Vec::new(),
             per_bin: 0,
         };
@@ -122,6 +125,11 @@ impl BinGrid {
                 let a = lambda_min + i as f64 * width;
                 points.iter().map(move |u| a + u * width)
             })
+            .collect();
+        grid.texel_ts = grid
+            .texel_lambdas
+            .iter()
+            .map(|&l| super::jakob_hanika::t_of(l))
             .collect();
         // White light (1, 1, 1) is D65 with Y = 1 (a flat sigmoid of ½, scaled by 2).
         let white = Spectrum::illuminant([1.0; 3]);
@@ -155,6 +163,7 @@ impl BinGrid {
             smits: None,
             upsampling: Upsampling::default(),
             texel_lambdas: Vec::new(),
+            texel_ts: Vec::new(),
             texel_d65: Vec::new(),
             per_bin: 0,
         }
@@ -217,20 +226,49 @@ impl BinGrid {
     /// given), from the grid's per-bin sample wavelengths.
     fn sigmoid_bin_means(&self, c: [f64; 3], scale: f64, weights: Option<&[f64]>, out: &mut [f32]) {
         let k = scale / self.per_bin as f64;
-        for (b, v) in out.iter_mut().enumerate() {
-            let at = b * self.per_bin..(b + 1) * self.per_bin;
-            let s: f64 = match weights {
-                Some(w) => self.texel_lambdas[at.clone()]
-                    .iter()
-                    .zip(&w[at])
-                    .map(|(&l, &d)| super::jakob_hanika::eval(c, l) * d)
-                    .sum(),
-                None => self.texel_lambdas[at]
-                    .iter()
-                    .map(|&l| super::jakob_hanika::eval(c, l))
-                    .sum(),
-            };
-            *v = (s * k) as f32;
+        let per = self.per_bin;
+        if !c.iter().all(|v| v.is_finite()) {
+            // A flat 0 or 1 (an infinite c₂): `eval`'s limits, point by point.
+            for (b, v) in out.iter_mut().enumerate() {
+                let at = b * per..(b + 1) * per;
+                let s: f64 = match weights {
+                    Some(w) => self.texel_lambdas[at.clone()]
+                        .iter()
+                        .zip(&w[at])
+                        .map(|(&l, &d)| super::jakob_hanika::eval(c, l) * d)
+                        .sum(),
+                    None => self.texel_lambdas[at]
+                        .iter()
+                        .map(|&l| super::jakob_hanika::eval(c, l))
+                        .sum(),
+                };
+                *v = (s * k) as f32;
+            }
+            return;
+        }
+        // Finite coefficients: `eval`'s arithmetic without its branch, a chunk of whole
+        // bins at a time into a buffer (a loop the compiler runs two lanes wide), then
+        // each bin's points summed in the same order as before: the same bits.
+        const POINTS: usize = 64;
+        let bins_per_chunk = (POINTS / per.max(1)).max(1);
+        let mut buf = [0.0f64; POINTS];
+        for (chunk, outs) in out.chunks_mut(bins_per_chunk).enumerate() {
+            let first = chunk * bins_per_chunk * per;
+            let m = outs.len() * per;
+            let ts = &self.texel_ts[first..first + m];
+            for (y, &t) in buf[..m].iter_mut().zip(ts) {
+                let x = (c[0] * t + c[1]) * t + c[2];
+                *y = 0.5 + 0.5 * x / (1.0 + x * x).sqrt();
+            }
+            if let Some(w) = weights {
+                for (y, &d) in buf[..m].iter_mut().zip(&w[first..first + m]) {
+                    *y *= d;
+                }
+            }
+            for (v, ys) in outs.iter_mut().zip(buf[..m].chunks_exact(per)) {
+                let s: f64 = ys.iter().sum();
+                *v = (s * k) as f32;
+            }
         }
     }
 
@@ -522,5 +560,63 @@ pub mod spd {
     /// No NaN or infinity (branch-free: every entry is read).
     pub fn all_finite(a: &[f32]) -> bool {
         a.iter().fold(true, |ok, v| ok & v.is_finite())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spectral::jakob_hanika::eval;
+
+    /// What `sigmoid_bin_means` computed before it ran in chunks: `eval` point by point.
+    fn pointwise(g: &BinGrid, c: [f64; 3], scale: f64, weights: Option<&[f64]>) -> Vec<f32> {
+        let (per, k) = (g.per_bin, scale / g.per_bin as f64);
+        (0..g.len())
+            .map(|b| {
+                let at = b * per..(b + 1) * per;
+                let s: f64 = match weights {
+                    Some(w) => g.texel_lambdas[at.clone()]
+                        .iter()
+                        .zip(&w[at])
+                        .map(|(&l, &d)| eval(c, l) * d)
+                        .sum(),
+                    None => g.texel_lambdas[at].iter().map(|&l| eval(c, l)).sum(),
+                };
+                (s * k) as f32
+            })
+            .collect()
+    }
+
+    #[test]
+    fn chunked_sigmoid_bin_means_are_the_pointwise_ones_bit_for_bit() {
+        // Bin counts with one point a bin (narrow bins), two, and several parts, some
+        // crossing the chunk's 64 points unevenly; coefficients up to the fit's bound,
+        // flat 0 and 1 (infinite c₂), and a NaN.
+        let coeffs = [
+            [0.0, 0.0, 0.3],
+            [-150.0, 140.0, -30.0],
+            [200.0, -200.0, 45.0],
+            [3.5, -1.25, 0.75],
+            [0.0, 0.0, f64::INFINITY],
+            [0.0, 0.0, f64::NEG_INFINITY],
+            [f64::NAN, 0.0, 0.0],
+        ];
+        for n in [1, 3, 7, 20, 33, 100, 470, 1000] {
+            let g = BinGrid::with_bins(n).unwrap();
+            for c in coeffs {
+                for weights in [None, Some(&g.texel_d65[..])] {
+                    let mut out = vec![0.0f32; n];
+                    g.sigmoid_bin_means(c, 1.7, weights, &mut out);
+                    let want = pointwise(&g, c, 1.7, weights);
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(
+                        bits(&out),
+                        bits(&want),
+                        "{n} bins, {c:?}, {}",
+                        weights.is_some()
+                    );
+                }
+            }
+        }
     }
 }

@@ -37,7 +37,7 @@ const MAX_COEFF: f64 = 200.0;
 
 /// The normalised wavelength the polynomial is written in.
 #[inline]
-fn t_of(lambda_nm: f64) -> f64 {
+pub(super) fn t_of(lambda_nm: f64) -> f64 {
     (lambda_nm - CMF_RANGE.0) / (CMF_RANGE.1 - CMF_RANGE.0)
 }
 
