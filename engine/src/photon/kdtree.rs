@@ -57,6 +57,12 @@ pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
         .map(|(i, p)| (p.map(order_key), i as u32))
         .collect();
     let mut axes = vec![0u8; positions.len()];
+    build(&mut items, &mut axes, bounds_of(positions));
+    (items.iter().map(|it| it.1).collect(), axes)
+}
+
+/// The smallest box holding `positions` (lowest and highest corner).
+fn bounds_of(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for p in positions {
         for a in 0..3 {
@@ -64,8 +70,7 @@ pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
             hi[a] = hi[a].max(p[a]);
         }
     }
-    build(&mut items, &mut axes, (lo, hi));
-    (items.iter().map(|it| it.1).collect(), axes)
+    (lo, hi)
 }
 
 /// Splits `items` at its median along the longest axis of `bounds` (the parent's box cut
@@ -452,14 +457,7 @@ mod tests {
             .map(|(i, p)| (*p, i as u32))
             .collect();
         let mut axes = vec![0u8; positions.len()];
-        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for p in positions {
-            for a in 0..3 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-            }
-        }
-        build(&mut items, &mut axes, (lo, hi));
+        build(&mut items, &mut axes, bounds_of(positions));
         (items.iter().map(|it| it.1).collect(), axes)
     }
 
