@@ -341,3 +341,22 @@ fn kd_build(bencher: Bencher) {
             .len()
     });
 }
+
+/// A 512² image to 8-bit sRGB (exposure, clamp, the transfer curve): what the viewer's UI
+/// thread does with each new image, and every PNG. Pixels spread over the whole curve
+/// (cubes of uniform numbers, times 2, so that some clip).
+#[divan::bench(sample_count = 20)]
+fn display_encode(bencher: Bencher) {
+    let mut rng = Rng::stream(5, 0, 0, Purpose::Photon);
+    let pixels: Vec<[f32; 3]> = (0..512 * 512)
+        .map(|_| [(); 3].map(|()| 2.0 * rng.next_f32().powi(3)))
+        .collect();
+    let image = prismap_engine::render::Image {
+        width: 512,
+        height: 512,
+        pixels,
+    };
+    bencher
+        .counter(ItemsCount::new(image.pixels.len()))
+        .bench_local(|| prismap_engine::output::to_srgb8(black_box(&image), 0.7));
+}

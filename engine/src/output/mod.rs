@@ -152,11 +152,13 @@ fn luminance_of(p: [f32; 3]) -> f32 {
 
 /// 8-bit sRGB pixels, RGB interleaved (exposure and tone map applied).
 pub fn to_display8(image: &Image, exposure: f32, tone: ToneMap) -> Vec<u8> {
-    image
-        .pixels
-        .iter()
-        .flat_map(|p| p.map(|v| srgb8(tone.apply(v * exposure))))
-        .collect()
+    let mut out = vec![0u8; 3 * image.pixels.len()];
+    for (o, p) in out.chunks_exact_mut(3).zip(&image.pixels) {
+        for (o, &v) in o.iter_mut().zip(p) {
+            *o = srgb8(tone.apply(v * exposure));
+        }
+    }
+    out
 }
 
 /// 8-bit sRGB pixels (exposure applied, clamped).
