@@ -272,6 +272,27 @@ fn the_denoised_view_is_display_only() {
 }
 
 #[test]
+fn automatic_exposure_is_the_engines_metering_of_the_shown_image() {
+    // The worker meters each image (so the UI thread does not); the exposure the viewer
+    // shows it at is what `prismap render` would pick for it, emitters left out.
+    let mut h = harness("cornell-box");
+    h.state().stop_after(Some(2));
+    wait_until(&mut h, "2 passes", |a| passes(a) == 2);
+    h.step();
+    let app = h.state();
+    let shown = app.snapshot.as_ref().unwrap();
+    assert!(app.auto_exposure);
+    assert_eq!(shown.emitter_pixels.len(), shown.image.pixels.len());
+    let metered = prismap::output::auto_exposure_skipping(&shown.image, &shown.emitter_pixels);
+    assert_eq!(app.exposure.to_bits(), metered.to_bits());
+    assert_ne!(
+        metered.to_bits(),
+        prismap::output::auto_exposure(&shown.image).to_bits(),
+        "the light seen directly must change the metering, or this test shows nothing"
+    );
+}
+
+#[test]
 fn viewer_image_after_n_passes_equals_the_engines() {
     let mut h = harness("prism");
     h.state().stop_after(Some(3));

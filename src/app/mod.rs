@@ -462,11 +462,7 @@ impl ViewerApp {
                 }
                 self.shown = Some(key);
                 if self.auto_exposure {
-                    self.exposure = if s.emitter_pixels.len() == s.image.pixels.len() {
-                        crate::output::auto_exposure_skipping(&s.image, &s.emitter_pixels)
-                    } else {
-                        crate::output::auto_exposure(&s.image)
-                    };
+                    self.exposure = s.auto_exposure;
                 }
                 self.check_target(&s);
                 self.snapshot = Some(s);

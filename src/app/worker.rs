@@ -57,6 +57,9 @@ pub struct Snapshot {
     /// The film's noise estimate (PSNR against its own expectation) at the image's
     /// automatic exposure; None before 2 passes.
     pub noise_psnr_db: Option<f64>,
+    /// `image`'s automatic exposure (emitters seen directly left out where the mask fits
+    /// it), metered here on the worker so that the UI thread need not per image.
+    pub auto_exposure: f32,
     /// Every pixel's spectrum, when the user asked to keep them.
     pub spectra: Option<Arc<crate::output::SpectralImage>>,
     /// The denoised display image, when the user asked for it.
@@ -361,6 +364,8 @@ fn run(
                                 let mut snap = snapshot(&quick, generation, started, false);
                                 snap.image =
                                     Arc::new(upscale(&quick.image(), full.width, full.height));
+                                snap.auto_exposure =
+                                    metered_exposure(&snap.image, &snap.emitter_pixels);
                                 snap.preview = true;
                                 *shared
                                     .snapshot
@@ -487,16 +492,23 @@ fn run(
     }
 }
 
+/// The automatic exposure of `image`, leaving out the pixels `emitters` marks when the
+/// mask is the image's size.
+fn metered_exposure(image: &Image, emitters: &[bool]) -> f32 {
+    if emitters.len() == image.pixels.len() {
+        crate::output::auto_exposure_skipping(image, emitters)
+    } else {
+        crate::output::auto_exposure(image)
+    }
+}
+
 fn snapshot(s: &RenderSession, generation: u64, started: Instant, denoise: bool) -> Snapshot {
     let image = Arc::new(s.image());
-    let exposure = if s.emitter_pixels().len() == image.pixels.len() {
-        crate::output::auto_exposure_skipping(&image, &s.emitter_pixels())
-    } else {
-        crate::output::auto_exposure(&image)
-    };
+    let exposure = metered_exposure(&image, &s.emitter_pixels());
     Snapshot {
         generation,
         noise_psnr_db: s.film().noise_psnr(exposure).filter(|v| v.is_finite()),
+        auto_exposure: exposure,
         image,
         stats: s.stats().clone(),
         memory: s.memory(),
