@@ -252,3 +252,49 @@ fn bad_arguments_fail_clearly_and_leave_no_file() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_readmes_cargo_run_picks_the_prismap_binary() {
+    // `cargo run --release` at the top is the README's main command. The workspace builds
+    // both crates by default and the engine has a binary of its own (`jh_table`), so
+    // without a `default-run` cargo refuses to choose: what cargo's metadata says it runs.
+    let out = Command::new(env!("CARGO"))
+        .args([
+            "metadata",
+            "--format-version",
+            "1",
+            "--no-deps",
+            "--offline",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let packages = meta["packages"].as_array().unwrap();
+    let default_members: Vec<&str> = meta["workspace_default_members"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m.as_str().unwrap())
+        .collect();
+    let bins: Vec<&str> = packages
+        .iter()
+        .filter(|p| default_members.contains(&p["id"].as_str().unwrap()))
+        .flat_map(|p| p["targets"].as_array().unwrap())
+        .filter(|t| t["kind"].as_array().unwrap().iter().any(|k| k == "bin"))
+        .map(|t| t["name"].as_str().unwrap())
+        .collect();
+    assert!(bins.contains(&"prismap"), "{bins:?}");
+    if bins.len() > 1 {
+        let root = packages.iter().find(|p| p["name"] == "prismap").unwrap();
+        assert_eq!(
+            root["default_run"], "prismap",
+            "binaries {bins:?}: `cargo run` needs the root package's default-run"
+        );
+    }
+}
