@@ -120,17 +120,20 @@ fn srgb8_table() -> &'static Srgb8Table {
         assert!(firsts[0] >= LOW_BITS, "the first step lies below the table");
         let mut base = Vec::with_capacity(BUCKETS);
         let mut step = Vec::with_capacity(BUCKETS);
+        // The steps are in increasing order: walk them alongside the buckets (a step at a
+        // bucket's lowest value is in its base already).
+        let mut next = firsts.iter().copied().peekable();
         for b in 0..BUCKETS as u32 {
             let lo = LOW_BITS + (b << BUCKET_SHIFT);
             let hi = lo + (1 << BUCKET_SHIFT); // exclusive
-            let inside: Vec<u32> = firsts
-                .iter()
-                .copied()
-                .filter(|&f| f > lo && f < hi)
-                .collect();
-            assert!(inside.len() <= 1, "two sRGB steps in one bucket");
+            while next.next_if(|&f| f <= lo).is_some() {}
+            let inside = next.next_if(|&f| f < hi);
+            assert!(
+                next.peek().is_none_or(|&f| f >= hi),
+                "two sRGB steps in one bucket"
+            );
             base.push(srgb8_direct(f32::from_bits(lo)));
-            step.push(inside.first().map_or(f32::INFINITY, |&f| f32::from_bits(f)));
+            step.push(inside.map_or(f32::INFINITY, f32::from_bits));
         }
         Srgb8Table { base, step }
     })
