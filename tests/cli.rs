@@ -69,29 +69,24 @@ fn render_writes_png_exr_and_stats() {
     let dir = temp_dir("ok");
     let png = dir.join("cb.png");
     let stats = dir.join("cb.json");
-    let out = prismap()
-        .args([
-            "render",
-            "cornell-box",
-            "--bins",
-            "8",
-            "--storage",
-            "full",
-            "--photons",
-            "5000",
-            "--passes",
-            "2",
-        ])
-        .args(["--size", "32x24", "--fg", "2", "--threads", "2", "-o"])
-        .arg(&png)
-        .arg("--stats")
-        .arg(&stats)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        prismap()
+            .args([
+                "render",
+                "cornell-box",
+                "--bins",
+                "8",
+                "--storage",
+                "full",
+                "--photons",
+                "5000",
+                "--passes",
+                "2",
+            ])
+            .args(["--size", "32x24", "--fg", "2", "--threads", "2", "-o"])
+            .arg(&png)
+            .arg("--stats")
+            .arg(&stats),
     );
     let img = image::open(&png).unwrap();
     assert_eq!((img.width(), img.height()), (32, 24));
@@ -132,25 +127,20 @@ fn render_writes_png_exr_and_stats() {
     assert_eq!(s["bytes_per_photon"], 16.0 + 4.0 * 8.0 + 1.0);
     assert_eq!(s["nonfinite_pixels"], 0);
     let exr = dir.join("cb.exr");
-    let out = prismap()
-        .args([
-            "render",
-            "prism",
-            "--photons",
-            "3000",
-            "--passes",
-            "1",
-            "--size",
-            "16x16",
-            "-o",
-        ])
-        .arg(&exr)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        prismap()
+            .args([
+                "render",
+                "prism",
+                "--photons",
+                "3000",
+                "--passes",
+                "1",
+                "--size",
+                "16x16",
+                "-o",
+            ])
+            .arg(&exr),
     );
     assert_eq!(prismap::output::read_exr(&exr).unwrap().width, 16);
     std::fs::remove_dir_all(&dir).unwrap();
@@ -185,6 +175,17 @@ fn same_command_gives_a_bit_identical_exr_on_1_2_and_8_threads() {
     assert_eq!(one, run("2", "b.exr"));
     assert_eq!(one, run("8", "c.exr"));
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Runs `cmd` expecting success (its stderr in the message if not); returns its output.
+fn succeeds(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
 }
 
 /// Runs prismap expecting failure; returns stderr.
@@ -258,21 +259,16 @@ fn the_readmes_cargo_run_picks_the_prismap_binary() {
     // `cargo run --release` at the top is the README's main command. The workspace builds
     // both crates by default and the engine has a binary of its own (`jh_table`), so
     // without a `default-run` cargo refuses to choose: what cargo's metadata says it runs.
-    let out = Command::new(env!("CARGO"))
-        .args([
-            "metadata",
-            "--format-version",
-            "1",
-            "--no-deps",
-            "--offline",
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeeds(
+        Command::new(env!("CARGO"))
+            .args([
+                "metadata",
+                "--format-version",
+                "1",
+                "--no-deps",
+                "--offline",
+            ])
+            .current_dir(env!("CARGO_MANIFEST_DIR")),
     );
     let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let packages = meta["packages"].as_array().unwrap();
