@@ -227,46 +227,34 @@ impl BinGrid {
     fn sigmoid_bin_means(&self, c: [f64; 3], scale: f64, weights: Option<&[f64]>, out: &mut [f32]) {
         let k = scale / self.per_bin as f64;
         let per = self.per_bin;
-        if !c.iter().all(|v| v.is_finite()) {
-            // A flat 0 or 1 (an infinite c₂): `eval`'s limits, point by point.
-            for (b, v) in out.iter_mut().enumerate() {
-                let at = b * per..(b + 1) * per;
-                let s: f64 = match weights {
-                    Some(w) => self.texel_lambdas[at.clone()]
-                        .iter()
-                        .zip(&w[at])
-                        .map(|(&l, &d)| super::jakob_hanika::eval(c, l) * d)
-                        .sum(),
-                    None => self.texel_lambdas[at]
-                        .iter()
-                        .map(|&l| super::jakob_hanika::eval(c, l))
-                        .sum(),
-                };
-                *v = (s * k) as f32;
-            }
-            return;
-        }
-        // Finite coefficients: `eval`'s arithmetic without its branch, a chunk of whole
-        // bins at a time into a buffer (a loop the compiler runs two lanes wide), then
-        // each bin's points summed in the same order as before: the same bits.
+        // A chunk of whole bins at a time into a buffer, then each bin's points summed in
+        // order. Finite coefficients take `eval`'s arithmetic without its branch (a loop
+        // the compiler runs two lanes wide); infinite ones (a flat 0 or 1) and NaN take
+        // `eval` itself, whose limits they need. The same bits as `eval` point by point.
+        let finite = c.iter().all(|v| v.is_finite());
         const POINTS: usize = 64;
         let bins_per_chunk = (POINTS / per.max(1)).max(1);
         let mut buf = [0.0f64; POINTS];
         for (chunk, outs) in out.chunks_mut(bins_per_chunk).enumerate() {
-            let first = chunk * bins_per_chunk * per;
-            let m = outs.len() * per;
-            let ts = &self.texel_ts[first..first + m];
-            for (y, &t) in buf[..m].iter_mut().zip(ts) {
-                let x = (c[0] * t + c[1]) * t + c[2];
-                *y = 0.5 + 0.5 * x / (1.0 + x * x).sqrt();
+            let at = chunk * bins_per_chunk * per..(chunk * bins_per_chunk + outs.len()) * per;
+            let ys = &mut buf[..at.len()];
+            if finite {
+                for (y, &t) in ys.iter_mut().zip(&self.texel_ts[at.clone()]) {
+                    let x = (c[0] * t + c[1]) * t + c[2];
+                    *y = 0.5 + 0.5 * x / (1.0 + x * x).sqrt();
+                }
+            } else {
+                for (y, &l) in ys.iter_mut().zip(&self.texel_lambdas[at.clone()]) {
+                    *y = super::jakob_hanika::eval(c, l);
+                }
             }
             if let Some(w) = weights {
-                for (y, &d) in buf[..m].iter_mut().zip(&w[first..first + m]) {
+                for (y, &d) in ys.iter_mut().zip(&w[at]) {
                     *y *= d;
                 }
             }
-            for (v, ys) in outs.iter_mut().zip(buf[..m].chunks_exact(per)) {
-                let s: f64 = ys.iter().sum();
+            for (v, bin) in outs.iter_mut().zip(ys.chunks_exact(per)) {
+                let s: f64 = bin.iter().sum();
                 *v = (s * k) as f32;
             }
         }
