@@ -5,9 +5,12 @@
 //!     cargo bench -p prismap-engine --bench speed
 //!
 //! Two scenes, as the issue measures them:
-//! - the Cornell box at 128², whole image, targets 30 / 35 / 40 dB;
+//! - the Cornell box at 128², whole image, targets 30 / 35 / 40 / 43 dB;
 //! - the prism (first-look camera) at 341×192 (the pixels of 256², at the camera's 16:9),
-//!   over its rainbow region only, targets 30 / 35 dB, against a 100-bin reference.
+//!   over its rainbow region only, targets 30 / 35 / 38 dB, against a 100-bin reference.
+//!
+//! The issue's goals are the 40 dB and 35 dB columns; the last targets (added in session
+//! 19, when the defaults reached 35 dB on the prism in 3 passes) still tell settings apart.
 //!
 //! Each scene runs the defaults and a few variants of photons per pass and final-gather
 //! rays, so the table also says which setting reaches a target first; a last table sets
@@ -336,7 +339,7 @@ fn main() {
             ..RenderSettings::default()
         };
         let (reference, secs) = reference_image(&scene, base.clone(), reference_passes);
-        let targets = [30.0, 35.0, 40.0];
+        let targets = [30.0, 35.0, 40.0, 43.0];
         let d = base.camera_samples as usize;
         // Session 4's defaults, session 6's, then this build's and a few around them.
         let mut variants: Vec<(usize, u32, usize)> = vec![
@@ -411,7 +414,7 @@ fn main() {
         // The rainbow clips at exposure 1 (clipped pixels agree at any error): the
         // reference's automatic exposure instead.
         let exposure = prismap_engine::output::auto_exposure(&reference);
-        let targets = [30.0, 35.0];
+        let targets = [30.0, 35.0, 38.0];
         // (bins, storage, photons, rays, caustic factor, caustic k, camera samples):
         // session 5's defaults, session 6's, then this build's and a few around them.
         let defaults = RenderSettings::default();
