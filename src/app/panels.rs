@@ -143,13 +143,23 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     )
                     .on_hover_text("Photons emitted per pass; each pass also shrinks the gather radius a little")
                     .changed();
-                restart |= ui
-                    .add(
-                        egui::Slider::new(&mut app.settings.final_gather_rays, 0..=64)
-                            .text("Final gather"),
-                    )
-                    .on_hover_text("Final-gather rays per pixel per pass for indirect light; 0 shows the global photon map directly")
-                    .changed();
+                ui.horizontal(|ui| {
+                    restart |= ui
+                        .add(
+                            egui::Slider::new(&mut app.settings.final_gather_rays, 0..=64)
+                                .text("Final gather"),
+                        )
+                        .on_hover_text("Final-gather rays per pixel per pass for indirect light; 0 shows the global photon map directly")
+                        .changed();
+                    if ui
+                        .selectable_label(app.settings.pool_gather, "pool")
+                        .on_hover_text("Neighbouring pixels (2×2) whose camera samples all reached one surface average their final-gather rays together: less noise in indirect light for the same rays (--no-fg-pool turns it off)")
+                        .clicked()
+                    {
+                        app.settings.pool_gather = !app.settings.pool_gather;
+                        restart = true;
+                    }
+                });
                 restart |= ui
                     .add(
                         egui::Slider::new(&mut app.settings.camera_samples, 1..=16)

@@ -82,6 +82,10 @@ pub struct RenderArgs {
     /// Final-gather rays per pixel per pass (0: show the global photon map directly).
     #[arg(long)]
     pub fg: Option<u32>,
+    /// Do not pool final-gather rays between neighbouring pixels (by default 2×2 pixels
+    /// whose camera samples all reached one surface average their rays together).
+    #[arg(long)]
+    pub no_fg_pool: bool,
     /// Camera rays per pixel per pass, spread over the pixel; the final-gather rays are
     /// shared out among them (edges and the light seen directly need many).
     #[arg(long)]
@@ -155,6 +159,7 @@ impl RenderArgs {
             height: self.size.map_or(base.height, |s| s.1),
             seed: self.seed.unwrap_or(base.seed),
             final_gather_rays: self.fg.unwrap_or(base.final_gather_rays),
+            pool_gather: base.pool_gather && !self.no_fg_pool,
             camera_samples: self.samples.unwrap_or(base.camera_samples),
             dispersion_split: self.split.unwrap_or(base.dispersion_split),
             caustic_factor: self.caustic_factor.unwrap_or(base.caustic_factor),

@@ -391,6 +391,8 @@ impl RenderSession {
             caustic_kernel,
             r_min: self.r_min(),
             final_gather_rays: self.settings.final_gather_rays,
+            pool_gather: self.settings.pool_gather,
+            pool_reach: super::gather::POOL_REACH * (self.radius_sq_factor.sqrt() as f32),
             camera_samples: self.settings.camera_samples,
             max_bounces: self.settings.max_bounces,
             caustic_reuse: self.caustic_reuse,
@@ -646,42 +648,62 @@ impl RenderSession {
         let rays = self.settings.final_gather_rays;
         let (cancel, probes, grid) = (&self.cancel, &self.probes, &self.scene.grid);
         let keep_all = self.spectra.is_some();
-        // One row per task: rayon otherwise cuts the rows into a few long runs, and when
-        // the costly rows (a caustic's) fall into one run its thread finishes alone.
-        let rows: Vec<Option<PassImage>> = (0..h)
+        // Pooled final gathering renders 2×2 blocks ([`Gather::block`]), their grid shifted
+        // by a pixel across and down from pass to pass so that no pixel always pools with
+        // the same neighbours; otherwise every block is one pixel.
+        let side = if gather.pool_gather { 2 } else { 1 };
+        let (ox, oy) = match side {
+            2 => ((pass & 1) as u32, ((pass >> 1) & 1) as u32),
+            _ => (0, 0),
+        };
+        let columns = spans(w, side, ox);
+        // One task per row of blocks: rayon otherwise cuts the rows into a few long runs,
+        // and when the costly rows (a caustic's) fall into one run its thread finishes alone.
+        let rows: Vec<Option<PassImage>> = spans(h, side, oy)
             .into_par_iter()
             .with_max_len(1)
             .map_init(
-                || (Scratch::new(n), vec![0.0f32; n]),
-                |(scratch, radiance), y| {
+                || {
+                    let blocks = (side * side) as usize;
+                    let outs = vec![vec![0.0f32; n]; blocks];
+                    (Scratch::new(n), outs, Vec::new(), Vec::new())
+                },
+                |(scratch, outs, pixels, rngs), (y0, y1)| {
                     if cancel.load(Ordering::Relaxed) {
                         return None;
                     }
+                    let count = ((y1 - y0) * w) as usize;
                     let mut spectra = Vec::new();
-                    let mut all = Vec::with_capacity(if keep_all { w as usize * n } else { 0 });
+                    let mut all = vec![0.0f32; if keep_all { count * n } else { 0 }];
+                    let mut image = vec![[0.0f32; 3]; count];
                     scratch.start_row();
-                    let row = (0..w)
-                        .map(|x| {
-                            let index = (y as u64) * w as u64 + x as u64;
-                            let mut rng = Rng::stream(seed, pass, index, Purpose::Camera);
-                            let fg = GatherSequence::for_pixel(
-                                seed,
-                                index,
-                                pass - 1,
-                                rays,
-                                gather.camera_samples,
-                            );
-                            gather.pixel((x, y), (w, h), &mut rng, fg, scratch, radiance);
+                    for &(x0, x1) in &columns {
+                        pixels.clear();
+                        rngs.clear();
+                        for y in y0..y1 {
+                            for x in x0..x1 {
+                                let index = (y as u64) * w as u64 + x as u64;
+                                rngs.push(Rng::stream(seed, pass, index, Purpose::Camera));
+                                let samples = gather.camera_samples;
+                                let fg =
+                                    GatherSequence::for_pixel(seed, index, pass - 1, rays, samples);
+                                pixels.push(((x, y), fg));
+                            }
+                        }
+                        let outs = &mut outs[..pixels.len()];
+                        gather.block(pixels, (w, h), rngs, scratch, outs);
+                        for (&((x, y), _), radiance) in pixels.iter().zip(outs.iter()) {
+                            let i = ((y - y0) * w + x) as usize;
                             if let Some(k) = probes.iter().position(|p| (p.x, p.y) == (x, y)) {
                                 spectra.push((k, radiance.clone()));
                             }
                             if keep_all {
-                                all.extend_from_slice(radiance);
+                                all[i * n..(i + 1) * n].copy_from_slice(radiance);
                             }
-                            grid.to_linear_srgb(radiance)
-                        })
-                        .collect();
-                    Some((row, spectra, all))
+                            image[i] = grid.to_linear_srgb(radiance);
+                        }
+                    }
+                    Some((image, spectra, all))
                 },
             )
             .collect();
@@ -813,6 +835,23 @@ impl RenderSession {
     }
 }
 
+/// `0..len` cut into runs of `side`, the first `offset` long when not 0 (the blocks of
+/// [`RenderSession::gather_image`]).
+fn spans(len: u32, side: u32, offset: u32) -> Vec<(u32, u32)> {
+    let mut v = Vec::new();
+    let mut start = 0;
+    if offset > 0 && len > 0 {
+        start = offset.min(len);
+        v.push((0, start));
+    }
+    while start < len {
+        let end = (start + side).min(len);
+        v.push((start, end));
+        start = end;
+    }
+    v
+}
+
 /// Knaus & Zwicker's schedule: r²ₖ₊₁/r₁² from r²ₖ/r₁² after pass k, kept in f64 (an f32
 /// factor would stop shrinking long before 100 000 passes).
 pub fn next_radius_sq_factor(factor: f64, pass: u64, alpha: f64) -> f64 {
@@ -823,6 +862,23 @@ pub fn next_radius_sq_factor(factor: f64, pass: u64, alpha: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn spans_cover_every_index_once_from_any_offset() {
+        assert_eq!(spans(5, 2, 1), vec![(0, 1), (1, 3), (3, 5)]);
+        assert_eq!(spans(5, 2, 0), vec![(0, 2), (2, 4), (4, 5)]);
+        assert_eq!(spans(3, 1, 0), vec![(0, 1), (1, 2), (2, 3)]);
+        assert_eq!(spans(1, 2, 1), vec![(0, 1)]);
+        assert!(spans(0, 2, 1).is_empty());
+        for len in 0..9 {
+            for (side, offset) in [(1, 0), (2, 0), (2, 1)] {
+                let s = spans(len, side, offset);
+                let flat: Vec<u32> = s.iter().flat_map(|&(a, b)| a..b).collect();
+                assert_eq!(flat, (0..len).collect::<Vec<_>>(), "{len} {side} {offset}");
+                assert!(s.iter().all(|&(a, b)| b > a && b - a <= side));
+            }
+        }
+    }
 
     #[test]
     fn radius_shrinks_monotonically_and_stays_finite_over_100k_passes() {

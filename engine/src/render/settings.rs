@@ -19,6 +19,11 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Final-gather rays per pixel per pass; 0 shows the global map directly.
     pub final_gather_rays: u32,
+    /// Neighbouring pixels (2×2 blocks) pool their final-gather rays where all their
+    /// camera samples reached one surface (`--no-fg-pool` turns it off; see
+    /// [`crate::render::gather::Gather::block`]).
+    #[serde(default = "yes")]
+    pub pool_gather: bool,
     /// Camera rays per pixel per pass (`--samples`), spread over the pixel; the
     /// final-gather rays are shared out among them. Edges, the light seen directly and
     /// direct shadows need many positions within a pixel, and a camera ray costs less
@@ -87,6 +92,7 @@ impl Default for RenderSettings {
             height: 256,
             seed: 1,
             final_gather_rays: 4,
+            pool_gather: true,
             camera_samples: DEFAULT_CAMERA_SAMPLES,
             max_bounces: DEFAULT_MAX_BOUNCES,
             alpha: 2.0 / 3.0,
@@ -141,6 +147,10 @@ fn default_caustic_factor() -> usize {
 pub const DEFAULT_CAMERA_SAMPLES: u32 = 4;
 /// Most camera rays per pixel per pass.
 pub const MAX_CAMERA_SAMPLES: u32 = 256;
+
+fn yes() -> bool {
+    true
+}
 
 fn default_camera_samples() -> u32 {
     DEFAULT_CAMERA_SAMPLES
