@@ -234,7 +234,8 @@ fn run_to_targets(m: &Measure, settings: RenderSettings) -> Outcome {
 const REFERENCE_SAMPLES: u32 = 8;
 
 /// A long render of another seed, with settings of its own (100 000 photons, 8
-/// final-gather rays and 8 camera rays a pixel a pass, whatever the defaults are), so that
+/// final-gather rays and 8 camera rays a pixel a pass, not pooled, whatever the defaults
+/// are), so that
 /// every run and every version of the engine is measured against the same kind of
 /// reference.
 fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Image, f64) {
@@ -267,6 +268,8 @@ fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Ima
             photons_per_pass: 100_000,
             final_gather_rays: 8,
             camera_samples: REFERENCE_SAMPLES,
+            // Each pixel its own rays: the reference carries none of pooling's blur.
+            pool_gather: false,
             ..settings
         },
     )
@@ -369,7 +372,7 @@ fn main() {
             targets: &targets,
             max_seconds,
         };
-        let variants: Vec<(String, RenderSettings)> = variants
+        let mut variants: Vec<(String, RenderSettings)> = variants
             .into_iter()
             .map(|(photons, rays, samples)| {
                 let name = format!("{photons} photons, {rays} rays, {samples} samples");
@@ -382,6 +385,7 @@ fn main() {
                 (name, settings)
             })
             .collect();
+        variants.push(unpooled(&base));
         let at_defaults = variants.iter().position(|(_, s)| *s == base);
         let rows = run_all(&measure, variants);
         print_table(
@@ -480,6 +484,8 @@ fn main() {
             bins: scene.auto_bins().0,
             ..base.clone()
         };
+        let mut variants = variants;
+        variants.push(unpooled(&viewer_defaults));
         let at_defaults = variants.iter().position(|(_, s)| *s == viewer_defaults);
         let rows = run_all(&measure, variants);
         prism = at_defaults.map(|i| rows[i].1.clone());
@@ -499,6 +505,19 @@ fn main() {
 }
 
 /// How the reference was had: rendered (and how long it took) or read from the cache.
+/// `base` with final-gather rays not pooled between pixels (`--no-fg-pool`).
+fn unpooled(base: &RenderSettings) -> (String, RenderSettings) {
+    let name = format!(
+        "{} bins, {} photons, {} rays, {} samples, not pooled",
+        base.bins, base.photons_per_pass, base.final_gather_rays, base.camera_samples
+    );
+    let settings = RenderSettings {
+        pool_gather: false,
+        ..base.clone()
+    };
+    (name, settings)
+}
+
 fn reference_note(secs: f64) -> String {
     if secs > 0.0 {
         format!("reference rendered in {secs:.0} s")
