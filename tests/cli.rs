@@ -147,6 +147,41 @@ fn render_writes_png_exr_and_stats() {
 }
 
 #[test]
+fn no_fg_pool_renders_each_pixel_from_its_own_rays_and_the_stats_say_which() {
+    let dir = temp_dir("pool");
+    let run = |extra: &[&str], name: &str| {
+        let (exr, stats) = (
+            dir.join(format!("{name}.exr")),
+            dir.join(format!("{name}.json")),
+        );
+        let mut cmd = prismap();
+        cmd.args([
+            "render",
+            "cornell-box",
+            "--photons",
+            "4000",
+            "--passes",
+            "2",
+        ])
+        .args(["--size", "24x24"])
+        .args(extra)
+        .arg("-o")
+        .arg(&exr)
+        .arg("--stats")
+        .arg(&stats);
+        succeeds(&mut cmd);
+        let s: prismap::output::Stats =
+            serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        (std::fs::read(&exr).unwrap(), s.fg_pool)
+    };
+    let (pooled, on) = run(&[], "pooled");
+    let (own, off) = run(&["--no-fg-pool"], "own");
+    assert!(on && !off);
+    assert_ne!(pooled, own, "pooling changes the pixels' indirect light");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn same_command_gives_a_bit_identical_exr_on_1_2_and_8_threads() {
     let dir = temp_dir("det");
     let run = |threads: &str, name: &str| {

@@ -19,6 +19,10 @@ pub struct Stats {
     /// Camera rays a pixel a pass (absent from stats written before session 7: 1).
     #[serde(default = "one")]
     pub camera_samples: u32,
+    /// Whether neighbouring pixels pooled their final-gather rays (absent from stats
+    /// written before session 19, which did not: false).
+    #[serde(default)]
+    pub fg_pool: bool,
     pub photons: PhotonStats,
     pub memory_bytes: MemoryStats,
     pub bytes_per_photon: f64,
@@ -100,6 +104,7 @@ impl Stats {
             photons_per_pass: s.photons_per_pass,
             final_gather_rays: s.final_gather_rays,
             camera_samples: s.camera_samples,
+            fg_pool: s.pool_gather && s.final_gather_rays > 0,
             photons: PhotonStats {
                 emitted: st.photons_emitted,
                 caustic_emitted: st.caustic_photons_emitted,
