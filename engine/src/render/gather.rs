@@ -502,13 +502,7 @@ impl Gather<'_> {
         // with no ray among them — estimates the pixel's indirect light without bias.
         // Pooled: the rays' radiance waits for the block (see [`Gather::block`]).
         if self.pool_gather {
-            s.fg.fill(0.0);
-            for j in 0..fg.rays {
-                let u = sobol02(fg.first.wrapping_add(j), fg.scramble);
-                let dir = cosine_hemisphere(nf, u);
-                self.final_gather_ray(self.scene.accel.offset(p, nf, dir), dir, rng, &mut s.ray);
-                spd::add_scaled(&mut s.fg, &s.ray.out, 1.0);
-            }
+            self.gather_rays(p, nf, rng, fg, s);
             let n = s.fg.len();
             let slot = s.slot as usize;
             let hit = PoolHit {
@@ -544,16 +538,22 @@ impl Gather<'_> {
             return;
         }
         if fg.rays > 0 {
-            s.fg.fill(0.0);
-            for j in 0..fg.rays {
-                let u = sobol02(fg.first.wrapping_add(j), fg.scramble);
-                let dir = cosine_hemisphere(nf, u);
-                self.final_gather_ray(self.scene.accel.offset(p, nf, dir), dir, rng, &mut s.ray);
-                spd::add_scaled(&mut s.fg, &s.ray.out, 1.0);
-            }
+            self.gather_rays(p, nf, rng, fg, s);
             let samples = self.camera_samples.max(1) as f32;
             let weight = std::f32::consts::PI * samples / self.final_gather_rays as f32;
             spd::add_scaled(&mut s.acc, &s.fg, weight);
+        }
+    }
+
+    /// The summed radiance of the sample's `fg.rays` final-gather rays from `p` (facing
+    /// `nf`), into `s.fg`: cosine-distributed directions from the pixel's sequence.
+    fn gather_rays(&self, p: Vec3, nf: Vec3, rng: &mut Rng, fg: GatherSequence, s: &mut Scratch) {
+        s.fg.fill(0.0);
+        for j in 0..fg.rays {
+            let u = sobol02(fg.first.wrapping_add(j), fg.scramble);
+            let dir = cosine_hemisphere(nf, u);
+            self.final_gather_ray(self.scene.accel.offset(p, nf, dir), dir, rng, &mut s.ray);
+            spd::add_scaled(&mut s.fg, &s.ray.out, 1.0);
         }
     }
 
