@@ -246,6 +246,14 @@ impl Gather<'_> {
     fn resolve_shared(&self, count: usize, s: &mut Scratch, outs: &mut [Vec<f32>]) {
         let n = s.fg.len();
         let samples = self.camera_samples.max(1);
+        // A pixel whose rays brought back a NaN or infinity keeps it to itself (the film
+        // drops that one sample) rather than spreading it over the block.
+        let mut finite = [false; 4];
+        for (k, f) in finite.iter_mut().enumerate().take(count) {
+            *f = s.pool[3 * n * k + n..3 * n * k + 2 * n]
+                .iter()
+                .all(|v| v.is_finite());
+        }
         let pooled = |px: &PixelPool| px.uniform && px.hits == samples && px.rays > 0;
         for (slot, out) in outs.iter_mut().enumerate().take(count) {
             let me = s.pixels[slot];
@@ -262,8 +270,8 @@ impl Gather<'_> {
             s.tmp.fill(0.0);
             let mut rays = 0;
             for (k, px) in s.pixels.iter().enumerate().take(count) {
-                let lends =
-                    k == slot || px.first.is_some_and(|b| pooled(px) && shares_rays(&a, &b));
+                let lends = k == slot
+                    || (finite[k] && px.first.is_some_and(|b| pooled(px) && shares_rays(&a, &b)));
                 if lends {
                     let l = &s.pool[3 * n * k + n..3 * n * k + 2 * n];
                     spd::add_scaled(&mut s.tmp, l, 1.0);
@@ -846,6 +854,88 @@ fn pixel_jitter(i: u32, offset: [f32; 2]) -> [f32; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_block_pools_its_uniform_pixels_rays_exactly_and_keeps_a_nan_at_home() {
+        // Four pixels of 2 camera samples and 2 rays each, hand-set: 0, 1 and 3 on one
+        // plane (1's rays brought back a NaN), 2 across an edge (its samples on two walls).
+        use crate::scene::load_builtin;
+        use crate::spectral::BinGrid;
+        let grid = BinGrid::with_bins(2).unwrap();
+        let scene = SpectralScene::new(&load_builtin("cornell-box").unwrap(), grid);
+        let empty = PhotonMap::build(crate::photon::PhotonBatch::new(
+            crate::photon::record::Record::Full,
+            &scene.grid,
+        ));
+        let kernel = Kernel {
+            k: 8,
+            r_max: 1.0,
+            r_start: 1.0,
+            shrink: 1.0,
+        };
+        let gather = Gather {
+            scene: &scene,
+            global: &empty,
+            caustic: None,
+            irradiance: None,
+            global_kernel: kernel,
+            caustic_kernel: kernel,
+            r_min: 1e-6,
+            final_gather_rays: 2,
+            pool_gather: true,
+            pool_reach: POOL_REACH,
+            camera_samples: 2,
+            max_bounces: 16,
+            caustic_reuse: CAUSTIC_REUSE,
+            tan_half_fov: 0.5,
+        };
+        let mut s = Scratch::new(2);
+        let hit = |x: f32, nf: Vec3| PoolHit {
+            p: Vec3::new(x, 0.0, 0.0),
+            nf,
+            reach: 1.0,
+        };
+        let px = |first, uniform| PixelPool {
+            first: Some(first),
+            hits: 2,
+            uniform,
+            rays: 2,
+        };
+        s.pixels = [
+            px(hit(0.0, Vec3::Z), true),
+            px(hit(0.3, Vec3::Z), true),
+            px(hit(0.5, Vec3::X), false),
+            px(hit(0.6, Vec3::Z), true),
+        ];
+        // Per pixel: Σw, ΣL, Σw⊙L (2 bins each).
+        let sums: [[f32; 6]; 4] = [
+            [1.0, 2.0, 4.0, 8.0, 3.0, 5.0],
+            [1.0, 1.0, f32::NAN, 0.0, f32::NAN, 0.0],
+            [2.0, 2.0, 6.0, 6.0, 7.0, 9.0],
+            [0.5, 0.5, 2.0, 4.0, 1.0, 1.0],
+        ];
+        s.pool = sums.concat();
+        let mut outs = vec![vec![0.0f32; 2]; 4];
+        gather.resolve_shared(4, &mut s, &mut outs);
+        let pi = std::f32::consts::PI;
+        // Pixel 0 pools itself and 3 (not 1's NaN, not 2 across the edge): 4 rays, 2
+        // samples: Σw ⊙ π (ΣL₀ + ΣL₃) / (4·2).
+        let expect0 = [1.0 * pi * 6.0 / 8.0, 2.0 * pi * 12.0 / 8.0];
+        for (o, e) in outs[0].iter().zip(expect0) {
+            assert!((o - e).abs() < 1e-5 * e, "{:?} vs {expect0:?}", outs[0]);
+        }
+        // Pixel 2 keeps its own rays' estimate: Σw⊙L · π/F.
+        assert_eq!(outs[2], vec![7.0 * pi / 2.0, 9.0 * pi / 2.0]);
+        // Pixel 1's NaN stays in pixel 1.
+        assert!(outs[1][0].is_nan());
+        assert!(
+            outs[0]
+                .iter()
+                .chain(&outs[2])
+                .chain(&outs[3])
+                .all(|v| v.is_finite())
+        );
+    }
 
     #[test]
     fn hits_pool_rays_on_their_own_surface_and_side_within_reach_only() {
