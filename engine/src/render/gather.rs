@@ -2,6 +2,7 @@
 //! radiance = direct light (light sampling) + caustics (caustic map) + indirect light
 //! (final gathering over the global map, as in Jensen's photon mapping). With zero final
 //! gather rays the global map is shown directly (all light from one density estimate).
+//! Neighbouring pixels may pool their final-gather rays ([`Gather::block`]).
 
 use glam::Vec3;
 
