@@ -856,6 +856,32 @@ fn pixel_jitter(i: u32, offset: [f32; 2]) -> [f32; 2] {
 mod tests {
     use super::*;
 
+    /// A gather over these maps with both kernels `kernel`, 4 rays and 4 camera samples,
+    /// unpooled.
+    fn test_gather<'a>(
+        scene: &'a SpectralScene,
+        global: &'a PhotonMap,
+        caustic: Option<&'a PhotonMap>,
+        kernel: Kernel,
+    ) -> Gather<'a> {
+        Gather {
+            scene,
+            global,
+            caustic,
+            irradiance: None,
+            global_kernel: kernel,
+            caustic_kernel: kernel,
+            r_min: 1e-6,
+            final_gather_rays: 4,
+            pool_gather: false,
+            pool_reach: POOL_REACH,
+            camera_samples: 4,
+            max_bounces: 16,
+            caustic_reuse: CAUSTIC_REUSE,
+            tan_half_fov: camera_tan_half_fov(&scene.camera),
+        }
+    }
+
     #[test]
     fn a_block_pools_its_uniform_pixels_rays_exactly_and_keeps_a_nan_at_home() {
         // Four pixels of 2 camera samples and 2 rays each, hand-set: 0, 1 and 3 on one
@@ -868,27 +894,11 @@ mod tests {
             crate::photon::record::Record::Full,
             &scene.grid,
         ));
-        let kernel = Kernel {
-            k: 8,
-            r_max: 1.0,
-            r_start: 1.0,
-            shrink: 1.0,
-        };
         let gather = Gather {
-            scene: &scene,
-            global: &empty,
-            caustic: None,
-            irradiance: None,
-            global_kernel: kernel,
-            caustic_kernel: kernel,
-            r_min: 1e-6,
             final_gather_rays: 2,
             pool_gather: true,
-            pool_reach: POOL_REACH,
             camera_samples: 2,
-            max_bounces: 16,
-            caustic_reuse: CAUSTIC_REUSE,
-            tan_half_fov: 0.5,
+            ..test_gather(&scene, &empty, None, Kernel::adaptive(8, 1.0, 1.0, 1.0))
         };
         let mut s = Scratch::new(2);
         let hit = |x: f32, nf: Vec3| PoolHit {
@@ -1132,22 +1142,7 @@ mod tests {
             r_start: 0.03,
             shrink: 1.0,
         };
-        let gather = Gather {
-            scene: &scene,
-            global: &empty,
-            caustic: Some(&map),
-            irradiance: None,
-            global_kernel: kernel,
-            caustic_kernel: kernel,
-            r_min: 1e-6,
-            final_gather_rays: 4,
-            pool_gather: false,
-            pool_reach: POOL_REACH,
-            camera_samples: 4,
-            max_bounces: 16,
-            caustic_reuse: CAUSTIC_REUSE,
-            tan_half_fov: camera_tan_half_fov(&scene.camera),
-        };
+        let gather = test_gather(&scene, &empty, Some(&map), kernel);
         let mut s = Scratch::new(4);
         let p0 = Vec3::new(0.5, 0.5, 0.0);
         gather.caustic_irradiance(&map, p0, Vec3::Z, &mut s);
