@@ -315,6 +315,46 @@ fn viewer_image_after_n_passes_equals_the_engines() {
 }
 
 #[test]
+fn the_pool_toggle_restarts_with_each_pixels_own_rays() {
+    // Pooling is on by default; clicking "pool" restarts the render unpooled, and the
+    // viewer's image after 2 passes is the engine's with `pool_gather` off, bit for bit.
+    let mut h = harness("cornell-box");
+    h.state().stop_after(Some(2));
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    assert!(h.state().settings.pool_gather);
+    let gen_before = h.state().last_restart_generation;
+    h.get_by_label("pool").click();
+    h.step();
+    assert!(h.state().last_restart_generation > gen_before, "restarts");
+    assert!(!h.state().settings.pool_gather);
+    wait_until(&mut h, "2 unpooled passes", |a| {
+        a.last_restart_generation > gen_before && passes(a) == 2
+    });
+    let shown = h.state().snapshot.clone().unwrap();
+    let scene = prismap::scene::load_builtin("cornell-box").unwrap();
+    let render = |pool_gather| {
+        let s = RenderSettings {
+            pool_gather,
+            ..h.state().settings.clone()
+        };
+        let mut engine = RenderSession::new(&scene, s).unwrap();
+        for _ in 0..2 {
+            engine.run_pass().unwrap();
+        }
+        engine.image()
+    };
+    let same = |a: &prismap::render::Image| {
+        (a.pixels.iter().zip(&shown.image.pixels))
+            .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits))
+    };
+    assert!(
+        same(&render(false)),
+        "the viewer renders the unpooled image"
+    );
+    assert!(!same(&render(true)), "which the pooled one is not");
+}
+
+#[test]
 fn the_viewer_renders_with_wgpu_headless() {
     // egui_kittest's wgpu renderer: Mesa's software Vulkan (mesa-vulkan-drivers), no display.
     let ctx = egui::Context::default();
