@@ -227,13 +227,14 @@ pub fn list() {
     for (name, preset) in crate::render::settings::PRESETS {
         let s = preset();
         println!(
-            "  {name:<12} {} bins {}, {} photons/pass, {}x{}, {} final-gather rays, {} camera samples",
+            "  {name:<12} {} bins {}, {} photons/pass, {}x{}, {} final-gather rays{}, {} camera samples",
             s.bins,
             s.storage.name(),
             s.photons_per_pass,
             s.width,
             s.height,
             s.final_gather_rays,
+            if s.pool_gather { " (pooled)" } else { "" },
             s.camera_samples
         );
     }

@@ -23,6 +23,9 @@ pub struct Job<'a> {
     /// How scene colours become spectra (the report's runs: Jakob–Hanika, but for the
     /// Smits pair that shows Algorithm 1 on the paper's own colours).
     pub spectra: Upsampling,
+    /// Whether neighbouring pixels pool their final-gather rays (the runs: the default,
+    /// yes; the reference: no, so it carries none of pooling's blur).
+    pub pool: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -62,6 +65,9 @@ impl Report {
         };
         if let Some(r) = &job.reference {
             cmd.arg("--reference").arg(r).arg("--error-csv").arg(&csv);
+        }
+        if !job.pool {
+            cmd.arg("--no-fg-pool");
         }
         let out = cmd.output().map_err(|e| ReportError::io(&self.exe, e))?;
         if !out.status.success() {

@@ -205,6 +205,7 @@ impl Report {
             output: exr.clone(),
             reference: None,
             spectra: Upsampling::default(),
+            pool: false,
         };
         self.render(&job)?;
         crate::output::write_json(&meta, &wanted)?;
@@ -311,6 +312,7 @@ impl Report {
                     limit,
                     reference: Some(ref_path.to_path_buf()),
                     spectra: Upsampling::default(),
+                    pool: true,
                 };
                 let run = self.measure(&job, mode, reference)?;
                 eprintln!(
@@ -341,6 +343,7 @@ impl Report {
                     limit: Limit::Passes(self.plan.passes),
                     reference: None,
                     spectra: Upsampling::Smits,
+                    pool: true,
                 };
                 self.render(&job)?;
                 eprintln!("  smits colours  {:<7} {b:>3} bins", storage.name());
@@ -391,6 +394,7 @@ impl Report {
                 },
                 reference: Some(ref_path.to_path_buf()),
                 spectra: Upsampling::default(),
+                pool: true,
             };
             let run = self.measure(&job, mode, reference)?;
             eprintln!(

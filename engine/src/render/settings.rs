@@ -199,12 +199,14 @@ impl RenderSettings {
         Self::default()
     }
 
-    /// A converged image to measure others against: full storage, 100 bins, many photons.
+    /// A converged image to measure others against: full storage, 100 bins, many photons,
+    /// each pixel's own final-gather rays (no pooling's blur).
     pub fn reference() -> Self {
         Self {
             bins: 100,
             storage: Storage::Full,
             photons_per_pass: 200_000,
+            pool_gather: false,
             ..Self::default()
         }
     }
