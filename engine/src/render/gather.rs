@@ -261,13 +261,12 @@ impl Gather<'_> {
             let sums = &s.pool[3 * n * slot..3 * n * (slot + 1)];
             let (w, rest) = sums.split_at(n);
             let wl = &rest[n..];
-            if !(pooled(&me) && me.first.is_some()) {
+            let Some(a) = me.first.filter(|_| pooled(&me)) else {
                 // Its own rays, each weighing 1/F of the pixel (as without pooling).
                 let scale = std::f32::consts::PI / self.final_gather_rays.max(1) as f32;
                 spd::add_scaled(out, wl, scale);
                 continue;
-            }
-            let a = me.first.expect("a pooled pixel has hits");
+            };
             s.tmp.fill(0.0);
             let mut rays = 0;
             for (k, px) in s.pixels.iter().enumerate().take(count) {
