@@ -104,7 +104,7 @@ impl Stats {
             photons_per_pass: s.photons_per_pass,
             final_gather_rays: s.final_gather_rays,
             camera_samples: s.camera_samples,
-            fg_pool: s.pool_gather && s.final_gather_rays > 0,
+            fg_pool: s.pools_gather(),
             photons: PhotonStats {
                 emitted: st.photons_emitted,
                 caustic_emitted: st.caustic_photons_emitted,

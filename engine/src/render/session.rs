@@ -391,7 +391,7 @@ impl RenderSession {
             caustic_kernel,
             r_min: self.r_min(),
             final_gather_rays: self.settings.final_gather_rays,
-            pool_gather: self.settings.pool_gather && self.settings.final_gather_rays > 0,
+            pool_gather: self.settings.pools_gather(),
             pool_reach: super::gather::POOL_REACH * (self.radius_sq_factor.sqrt() as f32),
             camera_samples: self.settings.camera_samples,
             max_bounces: self.settings.max_bounces,

@@ -236,6 +236,11 @@ impl RenderSettings {
         }
     }
 
+    /// Whether final-gather rays are pooled between pixels: asked for, and there are rays.
+    pub fn pools_gather(&self) -> bool {
+        self.pool_gather && self.final_gather_rays > 0
+    }
+
     /// Neighbours of a caustic-map estimate: `caustic_k` per unit of `caustic_factor`.
     pub fn caustic_neighbours(&self) -> usize {
         self.caustic_k.saturating_mul(self.caustic_factor.max(1))
