@@ -235,9 +235,8 @@ const REFERENCE_SAMPLES: u32 = 8;
 
 /// A long render of another seed, with settings of its own (100 000 photons, 8
 /// final-gather rays and 8 camera rays a pixel a pass, not pooled, whatever the defaults
-/// are), so that
-/// every run and every version of the engine is measured against the same kind of
-/// reference.
+/// are), so that every run and every version of the engine is measured against the same
+/// kind of reference.
 fn reference_image(scene: &Scene, settings: RenderSettings, passes: u64) -> (Image, f64) {
     let t = std::time::Instant::now();
     // PRISMAP_BENCH_CACHE=dir keeps each reference as an EXR named by its settings (to
@@ -457,7 +456,7 @@ fn main() {
         let split: Option<usize> = std::env::var("PRISMAP_BENCH_SPLIT")
             .ok()
             .map(|v| v.parse().expect("PRISMAP_BENCH_SPLIT: a whole number"));
-        let variants: Vec<(String, RenderSettings)> = variants
+        let mut variants: Vec<(String, RenderSettings)> = variants
             .into_iter()
             .map(|(bins, storage, photons, rays, caustic_factor, caustic_k, samples)| {
                 let packed = if storage == Storage::Packed { " packed" } else { "" };
@@ -484,7 +483,6 @@ fn main() {
             bins: scene.auto_bins().0,
             ..base.clone()
         };
-        let mut variants = variants;
         variants.push(unpooled(&viewer_defaults));
         let at_defaults = variants.iter().position(|(_, s)| *s == viewer_defaults);
         let rows = run_all(&measure, variants);
@@ -504,7 +502,6 @@ fn main() {
     print_issue_table(cornell.as_ref(), prism.as_ref());
 }
 
-/// How the reference was had: rendered (and how long it took) or read from the cache.
 /// `base` with final-gather rays not pooled between pixels (`--no-fg-pool`).
 fn unpooled(base: &RenderSettings) -> (String, RenderSettings) {
     let name = format!(
@@ -518,6 +515,7 @@ fn unpooled(base: &RenderSettings) -> (String, RenderSettings) {
     (name, settings)
 }
 
+/// How the reference was had: rendered (and how long it took) or read from the cache.
 fn reference_note(secs: f64) -> String {
     if secs > 0.0 {
         format!("reference rendered in {secs:.0} s")
