@@ -90,6 +90,7 @@ fn chart(material: impl Fn([f64; 3]) -> (MaterialKind, Option<Spectrum>)) -> Sce
             volume: None,
             base_color_texture: None,
             emissive_texture: None,
+            vertex_colors: false,
         });
         let c = centre(i);
         let p = |x: f32, y: f32| c + Vec3::new(x, y, 0.0);
@@ -104,6 +105,7 @@ fn chart(material: impl Fn([f64; 3]) -> (MaterialKind, Option<Spectrum>)) -> Sce
         triangle_material,
         shading_normals: vec![],
         triangle_uvs: vec![],
+        triangle_colors: vec![],
         materials,
         lights: vec![],
         camera: camera(),

@@ -353,6 +353,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
         triangle_material: vec![0],
         shading_normals: vec![],
         triangle_uvs: vec![],
+        triangle_colors: vec![],
         materials: vec![Material {
             name: "m".into(),
             kind: MaterialKind::Diffuse {
@@ -362,6 +363,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
             volume: None,
             base_color_texture: None,
             emissive_texture: None,
+            vertex_colors: false,
         }],
         lights: vec![],
         camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0),

@@ -86,6 +86,7 @@ impl Builder {
             volume: None,
             base_color_texture: None,
             emissive_texture: None,
+            vertex_colors: false,
         });
         self.triangle_material
             .extend(std::iter::repeat_n(m, tris.len()));
@@ -98,6 +99,7 @@ impl Builder {
             triangle_material: self.triangle_material,
             shading_normals: vec![],
             triangle_uvs: vec![],
+            triangle_colors: vec![],
             materials: self.materials,
             lights: vec![],
             camera,

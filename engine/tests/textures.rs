@@ -308,3 +308,165 @@ fn khronos_box_textured_renders_its_embedded_texture_on_a_rough_metal() {
         "green: {hills:?}"
     );
 }
+
+/// A unit quad at z = 0 facing +z of six vertices (two triangles that share none: lower
+/// left TL-BL-BR, upper right TL-BR-TR) with `COLOR_0` given as `(bytes, componentType,
+/// normalized, type)`, base colour factor `factor`, `material_extra` spliced into the
+/// material; a camera head-on; no light (the default sky).
+fn vertex_coloured_quad_gltf(
+    colors: (&[u8], u32, bool, &str),
+    factor: [f32; 3],
+    material_extra: &str,
+) -> String {
+    let (tl, tr, br, bl) = (
+        [-1.0f32, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [1.0, -1.0, 0.0],
+        [-1.0, -1.0, 0.0],
+    );
+    let mut bin = Vec::new();
+    for p in [tl, bl, br, tl, br, tr].iter().flatten() {
+        bin.extend_from_slice(&p.to_le_bytes());
+    }
+    let color_offset = bin.len();
+    bin.extend_from_slice(colors.0);
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let (component, normalized, kind) = (colors.1, colors.2, colors.3);
+    let b64 = base64::engine::general_purpose::STANDARD;
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0,1]}}],
+        "nodes":[{{"mesh":0}},{{"camera":0,"translation":[0,0,2.5]}}],
+        "cameras":[{{"type":"perspective","perspective":{{"yfov":0.6,"znear":0.01,"aspectRatio":1.0}}}}],
+        "materials":[{{"name":"painted","pbrMetallicRoughness":{{"baseColorFactor":[{f0},{f1},{f2},1],"metallicFactor":0}}{material_extra}}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0,"COLOR_0":1}},"material":0}}]}}],
+        "buffers":[{{"byteLength":{len},"uri":"data:application/octet-stream;base64,{data}"}}],
+        "bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":72}},{{"buffer":0,"byteOffset":{color_offset},"byteLength":{color_len}}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":6,"type":"VEC3","min":[-1,-1,0],"max":[1,1,0]}},
+                     {{"bufferView":1,"componentType":{component},"normalized":{normalized},"count":6,"type":"{kind}"}}]}}"#,
+        f0 = factor[0],
+        f1 = factor[1],
+        f2 = factor[2],
+        len = bin.len(),
+        data = b64.encode(&bin),
+        color_len = colors.0.len(),
+    )
+}
+
+#[test]
+fn vertex_colours_multiply_the_base_colour_as_blender_exports_them() {
+    // glTF's base colour is factor × texture × COLOR_0. Blender writes painted colour
+    // attributes as COLOR_0, unsigned-short normalised RGBA. The lower-left triangle's
+    // corners are all (0.8, 0.1, 0.1), the upper-right's all (0.1, 0.2, 0.7); the factor
+    // (0.5, 1, 1) halves red. Under the default sky each half shows its reflectance
+    // (0.4, 0.1, 0.1) and (0.05, 0.2, 0.7): exactly on the RGB grid, through the
+    // spectral round trip on 16 bins.
+    let (a, b) = ([0.8f32, 0.1, 0.1], [0.1f32, 0.2, 0.7]);
+    let mut bytes = Vec::new();
+    for c in [a, a, a, b, b, b] {
+        for v in [c[0], c[1], c[2], 1.0] {
+            bytes.extend_from_slice(&((v * 65535.0).round() as u16).to_le_bytes());
+        }
+    }
+    let factor = [0.5, 1.0, 1.0];
+    let text = vertex_coloured_quad_gltf((&bytes, 5123, true, "VEC4"), factor, "");
+    let s = scene::load_from_slice(text.as_bytes(), "painted.gltf", None).unwrap();
+    assert!(s.materials[0].vertex_colors, "{:?}", s.warnings);
+    assert_eq!(s.triangle_colors.len(), 2);
+    assert!(
+        s.warnings.iter().all(|w| !w.contains("COLOR_0")),
+        "{:?}",
+        s.warnings
+    );
+    for (storage, bins) in [(Storage::Compact, 16), (Storage::Rgb, 3)] {
+        let settings = RenderSettings {
+            bins,
+            storage,
+            width: 32,
+            height: 32,
+            photons_per_pass: 5_000,
+            final_gather_rays: 16,
+            ..RenderSettings::default()
+        };
+        let mut r = RenderSession::new(&s, settings).unwrap();
+        for _ in 0..4 {
+            r.run_pass().unwrap();
+        }
+        let img = r.image();
+        let grid = r.scene().grid.clone();
+        let round_trip = |rgb: [f32; 3]| -> [f32; 3] {
+            use prismap_engine::spectral::{Role, Spectrum};
+            if storage == Storage::Rgb {
+                return rgb;
+            }
+            let mut v = grid.project(
+                &Spectrum::reflectance(rgb.map(f64::from)),
+                Role::Reflectance,
+            );
+            let sky = grid.project(&Spectrum::illuminant([1.0; 3]), Role::Emission);
+            prismap_engine::spectral::spd::mul_assign(&mut v, &sky);
+            grid.to_linear_srgb(&v)
+        };
+        for (name, colour, (x, y)) in [("lower left", a, (6, 26)), ("upper right", b, (26, 6))] {
+            let want = round_trip([0, 1, 2].map(|c| colour[c] * factor[c]));
+            let got = img.get(x, y);
+            println!("{storage:?} {name}: {got:?} (want {want:?})");
+            for c in 0..3 {
+                assert!(
+                    (got[c] - want[c]).abs() < 0.02,
+                    "{storage:?} {name}: {got:?} vs {want:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_vertex_colours_are_named_and_glass_ignores_them_with_a_warning() {
+    // Float RGB colours: a NaN is an error naming the vertex; 1.5 is clamped with a
+    // warning; on a glass (KHR_materials_transmission) they are ignored, with a warning.
+    let floats = |values: [[f32; 3]; 6]| -> Vec<u8> {
+        values
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_le_bytes())
+            .collect()
+    };
+    let mut values = [[0.5f32; 3]; 6];
+    values[4][1] = f32::NAN;
+    let text = vertex_coloured_quad_gltf((&floats(values), 5126, false, "VEC3"), [1.0; 3], "");
+    let e = scene::load_from_slice(text.as_bytes(), "painted.gltf", None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("painted.gltf") && e.contains("COLOR_0[4]") && e.contains("NaN"),
+        "{e}"
+    );
+    values[4][1] = 1.5;
+    let text = vertex_coloured_quad_gltf((&floats(values), 5126, false, "VEC3"), [1.0; 3], "");
+    let s = scene::load_from_slice(text.as_bytes(), "painted.gltf", None).unwrap();
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("1 COLOR_0 colours outside [0, 1] clamped")),
+        "{:?}",
+        s.warnings
+    );
+    assert_eq!(s.triangle_colors[1][1], glam::Vec3::new(0.5, 1.0, 0.5));
+    let glass = r#","extensions":{"KHR_materials_transmission":{"transmissionFactor":1}}"#;
+    let text = vertex_coloured_quad_gltf(
+        (&floats([[0.5; 3]; 6]), 5126, false, "VEC3"),
+        [1.0; 3],
+        glass,
+    );
+    let s = scene::load_from_slice(text.as_bytes(), "painted.gltf", None).unwrap();
+    assert!(!s.materials[0].vertex_colors);
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("COLOR_0 ignored") && w.contains("\"painted\" is a glass")),
+        "{:?}",
+        s.warnings
+    );
+}

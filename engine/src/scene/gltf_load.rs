@@ -114,6 +114,7 @@ fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
             triangle_material: Vec::new(),
             shading_normals: Vec::new(),
             triangle_uvs: Vec::new(),
+            triangle_colors: Vec::new(),
             materials: Vec::new(),
             lights: Vec::new(),
             environment: None,
@@ -450,6 +451,71 @@ impl Walk<'_> {
         Ok(i)
     }
 
+    /// A primitive's `COLOR_0` (linear RGB per vertex, alpha dropped) checked, or None
+    /// when it has none (or not one per vertex). A non-finite colour is an error naming the
+    /// vertex; colours outside [0, 1] are clamped, with a warning. Marks the material as
+    /// vertex-coloured, and warns where its kind cannot use them.
+    fn vertex_colors(
+        &mut self,
+        colors: Option<Vec<Vec3>>,
+        pel: &str,
+        vertices: usize,
+        mat_index: u32,
+    ) -> Result<Option<Vec<Vec3>>, SceneError> {
+        let Some(mut colors) = colors else {
+            return Ok(None);
+        };
+        if colors.len() != vertices {
+            self.out.warnings.push(format!(
+                "{pel}: COLOR_0 has {} colours for {vertices} vertices: ignored",
+                colors.len()
+            ));
+            return Ok(None);
+        }
+        if let Some((i, c)) = colors.iter().enumerate().find(|(_, c)| !c.is_finite()) {
+            return Err(self.ctx.err(
+                format!("{pel}.COLOR_0[{i}]"),
+                format!("value {c} is not finite"),
+            ));
+        }
+        let outside = colors
+            .iter()
+            .filter(|c| c.min_element() < 0.0 || c.max_element() > 1.0)
+            .count();
+        if outside > 0 {
+            self.out.warnings.push(format!(
+                "{pel}: {outside} COLOR_0 colours outside [0, 1] clamped (glTF vertex colours are linear multipliers of the base colour)"
+            ));
+            for c in &mut colors {
+                *c = c.clamp(Vec3::ZERO, Vec3::ONE);
+            }
+        }
+        let material = &mut self.out.materials[mat_index as usize];
+        let uses = match &material.kind {
+            MaterialKind::Diffuse { reflectance } | MaterialKind::Mirror { reflectance, .. } => {
+                matches!(reflectance, Spectrum::Reflectance(_))
+            }
+            MaterialKind::Dielectric { .. } => false,
+        };
+        if !uses {
+            let what = if matches!(material.kind, MaterialKind::Dielectric { .. }) {
+                "a glass"
+            } else {
+                "a spectral reflectance (from the extras)"
+            };
+            let warning = format!(
+                "{pel}: COLOR_0 ignored: material \"{}\" is {what}, which vertex colours do not tint",
+                material.name
+            );
+            if !self.out.warnings.contains(&warning) {
+                self.out.warnings.push(warning);
+            }
+            return Ok(None);
+        }
+        material.vertex_colors = true;
+        Ok(Some(colors))
+    }
+
     fn primitive(
         &mut self,
         mesh: &gltf::Mesh,
@@ -506,6 +572,10 @@ impl Walk<'_> {
             .read_tex_coords(0)
             .map(|t| t.into_f32().collect())
             .filter(|t: &Vec<[f32; 2]>| t.len() == positions.len());
+        let colors = reader
+            .read_colors(0)
+            .map(|c| c.into_rgb_f32().map(Vec3::from).collect());
+        let colors = self.vertex_colors(colors, &pel, positions.len(), mat_index)?;
         for tri in indices.chunks_exact(3) {
             let t = [0, 1, 2].map(|k| world.transform_point3(positions[tri[k] as usize]));
             if t.iter().any(|v| !v.is_finite()) {
@@ -543,6 +613,15 @@ impl Walk<'_> {
                 filled,
                 uv,
                 [glam::Vec2::ZERO; 3],
+            );
+            let corner_colors = colors
+                .as_ref()
+                .map(|c| [0, 1, 2].map(|k| c[tri[k] as usize]));
+            push_per_triangle(
+                &mut self.out.triangle_colors,
+                filled,
+                corner_colors,
+                [Vec3::ONE; 3],
             );
             self.out.triangles.push(t);
             self.out.triangle_material.push(mat_index);
@@ -849,6 +928,7 @@ fn read_material(
         volume,
         base_color_texture,
         emissive_texture,
+        vertex_colors: false,
     })
 }
 

@@ -65,6 +65,10 @@ pub struct Material {
     /// glTF `emissiveTexture`: the emission is the factor's spectrum filtered by the
     /// texel's (see [`crate::scene::SpectralScene::emission_at`]).
     pub emissive_texture: Option<texture::TextureRef>,
+    /// Some primitive of this material has vertex colours (glTF `COLOR_0`): its base
+    /// colour is multiplied per hit by the colour interpolated between the triangle's
+    /// corners (glTF: factor × texture × `COLOR_0`; see [`Scene::triangle_colors`]).
+    pub vertex_colors: bool,
 }
 
 /// Beer–Lambert absorption inside a closed glass: after `distance` scene units inside,
@@ -150,6 +154,10 @@ pub struct Scene {
     /// Per-vertex texture coordinates (glTF `TEXCOORD_0`) of each triangle, in triangle
     /// order; empty when no mesh has any.
     pub triangle_uvs: Vec<[glam::Vec2; 3]>,
+    /// Per-vertex linear RGB colours (glTF `COLOR_0`, alpha dropped, clamped to [0, 1])
+    /// of each triangle, in triangle order; empty when no mesh has any. A triangle
+    /// without them is white.
+    pub triangle_colors: Vec<[Vec3; 3]>,
     pub materials: Vec<Material>,
     pub lights: Vec<PunctualLight>,
     /// Radiance of a uniform sky around the scene (seen where rays escape), if any: what a

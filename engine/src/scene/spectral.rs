@@ -35,6 +35,16 @@ pub enum SurfaceKind {
     },
 }
 
+/// glTF's base colour where it varies: factor × texel × vertex colour, linear RGB.
+#[derive(Clone, Debug)]
+pub struct BaseColor {
+    pub factor: [f32; 3],
+    pub texture: Option<TextureRef>,
+    /// Multiply by the colour interpolated between the triangle's corners
+    /// ([`SpectralScene::triangle_colors`]).
+    pub vertex_colors: bool,
+}
+
 #[derive(Clone, Debug)]
 pub struct SMaterial {
     pub name: String,
@@ -42,8 +52,9 @@ pub struct SMaterial {
     pub emission: Option<Vec<f32>>,
     /// Absorption coefficient σ per bin inside a glass (per scene unit), if it absorbs.
     pub absorption: Option<Vec<f32>>,
-    /// A base-colour texture, with the factor it multiplies (linear RGB).
-    pub texture: Option<(TextureRef, [f32; 3])>,
+    /// A base colour that varies over the surface (a texture, vertex colours or both),
+    /// upsampled per hit; None: `kind`'s reflectance everywhere.
+    pub base: Option<BaseColor>,
     /// An emissive texture: it filters `emission` per hit.
     pub emission_texture: Option<TextureRef>,
 }
@@ -69,6 +80,8 @@ pub struct SpectralScene {
     pub shading_normals: Vec<[Vec3; 3]>,
     /// Vertex texture coordinates per triangle (empty: none).
     pub triangle_uvs: Vec<[glam::Vec2; 3]>,
+    /// Vertex colours (linear RGB) per triangle (empty: none).
+    pub triangle_colors: Vec<[Vec3; 3]>,
     pub materials: Vec<SMaterial>,
     pub lights: LightSet,
     /// Radiance of the uniform sky, seen by camera paths that escape (None: black).
@@ -140,6 +153,11 @@ impl SpectralScene {
             } else {
                 Vec::new()
             },
+            triangle_colors: if scene.triangle_colors.len() == scene.triangles.len() {
+                scene.triangle_colors.clone()
+            } else {
+                Vec::new()
+            },
             shading_normals: if scene.shading_normals.len() == scene.triangles.len() {
                 scene.shading_normals.clone()
             } else {
@@ -190,15 +208,29 @@ impl SpectralScene {
         hit: &SurfaceHit,
         scratch: &'a mut Vec<f32>,
     ) -> &'a [f32] {
-        let (Some((tex, factor)), Some(uv)) =
-            (&mat.texture, self.triangle_uvs.get(hit.prim as usize))
-        else {
+        let Some(base) = &mat.base else {
             return reflectance;
         };
+        let prim = hit.prim as usize;
         let (b1, b2) = hit.bary;
-        let at = uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2;
-        let texel = tex.sample(at);
-        let rgb = [0, 1, 2].map(|c| (texel[c] * factor[c]).clamp(0.0, 1.0));
+        let b0 = 1.0 - b1 - b2;
+        let mut rgb = base.factor;
+        let mut varies = false;
+        // A texture without texture coordinates is not applied.
+        if let (Some(tex), Some(uv)) = (&base.texture, self.triangle_uvs.get(prim)) {
+            let texel = tex.sample(uv[0] * b0 + uv[1] * b1 + uv[2] * b2);
+            rgb = [0, 1, 2].map(|c| rgb[c] * texel[c]);
+            varies = true;
+        }
+        if let (true, Some(c)) = (base.vertex_colors, self.triangle_colors.get(prim)) {
+            let vc = c[0] * b0 + c[1] * b1 + c[2] * b2;
+            rgb = [rgb[0] * vc.x, rgb[1] * vc.y, rgb[2] * vc.z];
+            varies = true;
+        }
+        if !varies {
+            return reflectance;
+        }
+        let rgb = rgb.map(|c| c.clamp(0.0, 1.0));
         scratch.resize(self.grid.len(), 0.0);
         self.grid.upsample_reflectance_into(rgb, scratch);
         scratch
@@ -281,6 +313,30 @@ pub fn ggx_alpha(roughness: f32) -> f32 {
     }
 }
 
+/// Where `m`'s base colour varies over its surfaces (see [`BaseColor`]): a texture on
+/// a diffuse or metal surface (whose factor is its RGB reflectance, or white beside a
+/// spectral one), or vertex colours on an RGB reflectance (the loader marks only those).
+fn base_color(m: &Material) -> Option<BaseColor> {
+    let rgb = match &m.kind {
+        MaterialKind::Diffuse { reflectance } | MaterialKind::Mirror { reflectance, .. } => {
+            match reflectance {
+                Spectrum::Reflectance(c) => Some(c.rgb.map(|c| c as f32)),
+                _ => None,
+            }
+        }
+        MaterialKind::Dielectric { .. } => return None,
+    };
+    let vertex_colors = m.vertex_colors && rgb.is_some();
+    if m.base_color_texture.is_none() && !vertex_colors {
+        return None;
+    }
+    Some(BaseColor {
+        factor: rgb.unwrap_or([1.0; 3]),
+        texture: m.base_color_texture.clone(),
+        vertex_colors,
+    })
+}
+
 /// A material's per-bin data on `grid`.
 fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
     // Reflectances above 1 (Smits' basis reaches 1.0007) would add energy.
@@ -331,25 +387,7 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
         name: m.name.clone(),
         kind,
         emission: m.emission.as_ref().map(|e| grid.project(e, Role::Emission)),
-        texture: match (&m.base_color_texture, &m.kind) {
-            (
-                Some(t),
-                MaterialKind::Diffuse {
-                    reflectance: Spectrum::Reflectance(c),
-                },
-            ) => Some((t.clone(), c.rgb.map(|c| c as f32))),
-            (
-                Some(t),
-                MaterialKind::Mirror {
-                    reflectance: Spectrum::Reflectance(c),
-                    ..
-                },
-            ) => Some((t.clone(), c.rgb.map(|c| c as f32))),
-            (Some(t), MaterialKind::Diffuse { .. } | MaterialKind::Mirror { .. }) => {
-                Some((t.clone(), [1.0; 3]))
-            }
-            _ => None,
-        },
+        base: base_color(m),
         emission_texture: m.emissive_texture.clone(),
         absorption: m.volume.as_ref().map(|v| {
             grid.project(&Spectrum::reflectance(v.color), Role::Reflectance)
