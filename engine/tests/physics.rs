@@ -1274,3 +1274,96 @@ fn split_photons_carry_each_bins_own_transmittance_through_dispersive_glass() {
         }
     }
 }
+
+#[test]
+fn smooth_shading_takes_a_diffuse_surfaces_cosine_from_its_vertex_normals() {
+    // A diffuse floor under a Sun straight down, its vertex normals all tilted by 30°
+    // (as a smooth-shaded mesh's are where the surface curves): the camera sees direct
+    // light ρE·cos 30°/π, the cosine with the shading normal. With flat shading, ρE/π.
+    // (A Sun below the shading normal's horizon gives nothing; the photons' own density,
+    // fg 0, is the geometric surface's irradiance either way.)
+    use prismap_engine::scene::{PunctualKind, PunctualLight};
+    let (rho, e) = (0.5, 3.0);
+    let tilt = 30f32.to_radians();
+    let n = Vec3::new(tilt.sin(), tilt.cos(), 0.0);
+    for (smooth, sun_dir, cos) in [
+        (false, -Vec3::Y, 1.0),
+        (true, -Vec3::Y, f64::from(tilt.cos())),
+        // Light from 70° on the far side of the tilt: 100° from the shading normal.
+        (
+            true,
+            Vec3::new(70f32.to_radians().sin(), -70f32.to_radians().cos(), 0.0),
+            0.0,
+        ),
+    ] {
+        let mut b = Builder::new();
+        b.add(floor_4x4(), diffuse(rho), None);
+        let mut scene = b.scene(
+            "sun-tilted-normals",
+            Camera::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::ZERO, Vec3::Z, 0.5),
+        );
+        if smooth {
+            scene.shading_normals = vec![[n; 3]; scene.triangles.len()];
+        }
+        scene.lights.push(PunctualLight {
+            name: "Sun".into(),
+            position: Vec3::ZERO,
+            kind: PunctualKind::Directional { direction: sun_dir },
+            intensity: Spectrum::Constant(e),
+        });
+        let geometric_cos = f64::from(-sun_dir.y);
+        let exact = rho * e * cos / std::f64::consts::PI;
+        for (storage, bins) in [(Storage::Compact, 8), (Storage::Rgb, 3)] {
+            let mean = mean_luminance(&scene, settings(storage, bins, 4, 16, 20_000), 4);
+            println!("smooth {smooth} {storage:?}: {mean:.4} (exact {exact:.4})");
+            // Only the Sun lights the floor: no indirect light (a lone plane).
+            assert!(
+                (mean - exact).abs() < 1e-3 * rho * e * geometric_cos.max(0.3),
+                "smooth {smooth} {storage:?}: {mean} against ρ·E·cos/π = {exact}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_smooth_shaded_diffuse_ball_looks_like_a_finely_tessellated_one() {
+    // Blender's smooth shading: a 12 × 24 UV sphere with its exact vertex normals, under
+    // a Sun, against a 96 × 192 one. The flat-shaded coarse ball shows its facets (every
+    // facet one cosine); the smooth one shades each point by its interpolated normal.
+    use prismap_engine::scene::{PunctualKind, PunctualLight};
+    let image = |rings: usize, smooth: bool| {
+        let (tris, normals) = uv_sphere(Vec3::ZERO, 1.0, rings, 2 * rings);
+        let mut b = Builder::new();
+        b.add(tris, diffuse(0.7), None);
+        let mut s = b.scene(
+            "ball",
+            Camera::look_at(Vec3::new(0.0, 1.0, 4.0), Vec3::ZERO, Vec3::Y, 0.6),
+        );
+        if smooth {
+            s.shading_normals = normals;
+        }
+        s.lights.push(PunctualLight {
+            name: "Sun".into(),
+            position: Vec3::ZERO,
+            kind: PunctualKind::Directional {
+                direction: Vec3::new(-0.5, -0.6, -0.62).normalize(),
+            },
+            intensity: Spectrum::Constant(3.0),
+        });
+        let mut r = RenderSession::new(&s, settings(Storage::Compact, 8, 4, 48, 10_000)).unwrap();
+        for _ in 0..4 {
+            r.run_pass().unwrap();
+        }
+        r.image()
+            .pixels
+            .iter()
+            .map(|p| luminance(p.map(f64::from)))
+            .collect::<Vec<_>>()
+    };
+    let fine = image(96, false);
+    let mean_abs =
+        |a: &[f64]| a.iter().zip(&fine).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64;
+    let (flat, smooth) = (mean_abs(&image(12, false)), mean_abs(&image(12, true)));
+    println!("mean |coarse − fine|: flat {flat:.5}, smooth {smooth:.5}");
+    assert!(smooth < 0.5 * flat, "smooth {smooth} against flat {flat}");
+}

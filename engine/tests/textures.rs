@@ -470,3 +470,62 @@ fn bad_vertex_colours_are_named_and_glass_ignores_them_with_a_warning() {
         s.warnings
     );
 }
+
+#[test]
+fn blenders_painted_colour_attributes_load_as_vertex_colours() {
+    // scenes/blender/vertex-painted.glb (make_blender_fixtures.py, Blender 5.0): a cube
+    // painted one colour per face (corner domain) and a smooth ico sphere with a colour
+    // per vertex, each through a Color Attribute node into the Base Color.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes/blender/vertex-painted.glb");
+    let s = scene::load(&path).unwrap();
+    assert!(
+        s.warnings.iter().all(|w| !w.contains("COLOR_0")),
+        "{:?}",
+        s.warnings
+    );
+    let painted: Vec<&str> = s
+        .materials
+        .iter()
+        .filter(|m| m.vertex_colors)
+        .map(|m| m.name.as_str())
+        .collect();
+    assert_eq!(painted, ["face paint", "gradient paint"]);
+    assert_eq!(s.triangle_colors.len(), s.triangles.len());
+    // The cube's triangles: each has one colour at all three corners, and there are the
+    // six face colours (linear, as painted).
+    let faces = [
+        [0.8, 0.1, 0.1],
+        [0.1, 0.6, 0.1],
+        [0.1, 0.2, 0.7],
+        [0.7, 0.7, 0.2],
+        [0.6, 0.2, 0.6],
+        [0.2, 0.6, 0.6],
+    ];
+    let cube = s
+        .materials
+        .iter()
+        .position(|m| m.name == "face paint")
+        .unwrap() as u32;
+    let mut seen = [false; 6];
+    for (t, c) in s.triangle_colors.iter().enumerate() {
+        if s.triangle_material[t] != cube {
+            continue;
+        }
+        assert!(c[0] == c[1] && c[1] == c[2], "triangle {t}: {c:?}");
+        let k = faces
+            .iter()
+            .position(|f| (0..3).all(|i| (c[0][i] - f[i]).abs() < 2e-3))
+            .unwrap_or_else(|| panic!("triangle {t}: colour {:?} is no face's", c[0]));
+        seen[k] = true;
+    }
+    assert_eq!(seen, [true; 6]);
+    // The ground has none: white.
+    let ground = s.materials.iter().position(|m| m.name == "ground").unwrap() as u32;
+    let t = s
+        .triangle_material
+        .iter()
+        .position(|&m| m == ground)
+        .unwrap();
+    assert_eq!(s.triangle_colors[t], [glam::Vec3::ONE; 3]);
+}

@@ -16,6 +16,13 @@ Writes, beside this script:
                           roughness 0.35), a rough glass sphere (transmission 1, roughness
                           0.3), a thick green glass slab (Volume Absorption: exported as
                           KHR_materials_volume) and a smooth silver mirror, on a grey floor
+- vertex-painted.glb      under a Sun, a smooth ico sphere whose colour attribute (linear
+                          float colours, one per vertex: a red-green-blue gradient over
+                          its position) feeds the Base Color through a Color Attribute
+                          node (exported as COLOR_0), beside a cube painted one colour per
+                          face (corner domain), on a grey ground
+
+One fixture alone: give its name, e.g. `... make_blender_fixtures.py vertex-painted`.
 """
 import math
 import os
@@ -220,14 +227,64 @@ def rough_materials():
     export("rough-materials.glb")
 
 
+def painted_material(name, layer):
+    m = material(name, (1, 1, 1))
+    node = m.node_tree.nodes.new("ShaderNodeVertexColor")
+    node.layer_name = layer
+    m.node_tree.links.new(node.outputs["Color"], m.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    return m
+
+
+def vertex_painted():
+    startup()
+    bpy.data.objects.remove(bpy.data.objects["Light"])
+    # The default cube, one colour per face (corner domain: each face's corners alike).
+    cube = bpy.data.objects["Cube"]
+    cube.location = (-1.6, 0, 0)
+    cube.scale = (0.7, 0.7, 0.7)
+    faces = [(0.8, 0.1, 0.1), (0.1, 0.6, 0.1), (0.1, 0.2, 0.7), (0.7, 0.7, 0.2), (0.6, 0.2, 0.6), (0.2, 0.6, 0.6)]
+    mesh = cube.data
+    attr = mesh.color_attributes.new(name="FacePaint", type="FLOAT_COLOR", domain="CORNER")
+    for poly in mesh.polygons:
+        for li in poly.loop_indices:
+            attr.data[li].color = (*faces[poly.index % len(faces)], 1.0)
+    cube.data.materials.clear()
+    cube.data.materials.append(painted_material("face paint", "FacePaint"))
+    # A smooth ico sphere with a colour per vertex: a gradient over its position.
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=0.9, location=(1.2, 0, 0))
+    bpy.ops.object.shade_smooth()
+    sphere = bpy.context.object
+    attr = sphere.data.color_attributes.new(name="Gradient", type="FLOAT_COLOR", domain="POINT")
+    for v in sphere.data.vertices:
+        x, y, z = (c / 0.9 for c in v.co)
+        attr.data[v.index].color = (0.5 + 0.4 * x, 0.5 + 0.4 * y, 0.5 + 0.4 * z, 1.0)
+    sphere.data.materials.append(painted_material("gradient paint", "Gradient"))
+    bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, -1))
+    bpy.context.object.data.materials.append(material("ground", (0.5, 0.5, 0.5)))
+    sun = bpy.data.lights.new("Sun", type="SUN")
+    sun.energy = 3.0
+    obj = bpy.data.objects.new("Sun", sun)
+    obj.rotation_euler = (math.radians(30), math.radians(15), 0)
+    bpy.context.collection.objects.link(obj)
+    export("vertex-painted.glb")
+
+
 def direction_to_euler(d):
     from mathutils import Vector
     return Vector(d).to_track_quat("-Z", "Y").to_euler()
 
 
+FIXTURES = {
+    "default-lights": default_scenes,
+    "sun": sun_scene,
+    "spotlit-prism": spotlit_prism,
+    "textured-glass": textured_glass,
+    "rough-materials": rough_materials,
+    "vertex-painted": vertex_painted,
+}
+
 if __name__ == "__main__":
-    default_scenes()
-    sun_scene()
-    spotlit_prism()
-    textured_glass()
-    rough_materials()
+    import sys
+
+    for name in sys.argv[1:] or FIXTURES:
+        FIXTURES[name]()

@@ -214,18 +214,22 @@ impl LightSet {
         Some((origin, dir))
     }
 
-    /// Irradiance (N bins) at `p` (facing normal `nf`) from one light sample with a shadow
-    /// ray, into `out`; zero when the sample is occluded or faces away.
+    /// Irradiance (N bins) at `p` from one light sample with a shadow ray, into `out`;
+    /// zero when the sample is occluded or faces away. `nf` is the geometric normal on the
+    /// side seen (light must arrive on that side), `ns` the shading normal the cosine is
+    /// taken with (smooth shading; `nf` itself on flat triangles).
+    #[allow(clippy::too_many_arguments)]
     pub fn direct(
         &self,
         tris: &[TriData],
         accel: &Accel,
         p: Vec3,
         nf: Vec3,
+        ns: Vec3,
         [u_light, u, v]: [f32; 3],
         out: &mut [f32],
     ) {
-        match self.sample_direct_at(tris, accel, p, nf, u_light, [u, v]) {
+        match self.sample_direct_at(tris, accel, p, (nf, ns), u_light, [u, v]) {
             Some(s) => {
                 let (spectrum, k) = (&self.lights[s.light].spectrum, s.cos * s.weight);
                 debug_assert_eq!(spectrum.len(), out.len());
@@ -249,17 +253,19 @@ impl LightSet {
         nf: Vec3,
         rng: &mut Rng,
     ) -> Option<DirectSample> {
-        self.sample_direct_at(tris, accel, p, nf, rng.next_f32(), rng.next_2d())
+        self.sample_direct_at(tris, accel, p, (nf, nf), rng.next_f32(), rng.next_2d())
     }
 
     /// [`Self::sample_direct`] with its random numbers given: `u_light` picks the light,
-    /// `uv` the point on it (a pixel's sequence across passes, see `gather`).
+    /// `uv` the point on it (a pixel's sequence across passes, see `gather`). The normals
+    /// are (geometric on the side seen, shading): the light must lie above both, and the
+    /// cosine is the shading normal's.
     pub fn sample_direct_at(
         &self,
         tris: &[TriData],
         accel: &Accel,
         p: Vec3,
-        nf: Vec3,
+        (nf, ns): (Vec3, Vec3),
         u_light: f32,
         uv: [f32; 2],
     ) -> Option<DirectSample> {
@@ -286,8 +292,11 @@ impl LightSet {
                 (w / dist, dist, weight)
             }
         };
-        let cos_x = nf.dot(wn);
+        let cos_x = ns.dot(wn);
         if !(cos_x > 0.0 && weight.is_finite() && weight > 0.0) {
+            return None;
+        }
+        if ns != nf && !(nf.dot(wn) > 0.0) {
             return None;
         }
         let origin = accel.offset(p, nf, wn);

@@ -380,7 +380,7 @@ impl Gather<'_> {
                     let mut buf = std::mem::take(&mut s.refl);
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut buf);
                     s.stretch = 1.0 / dir.dot(nf).abs().max(0.05);
-                    self.shade_diffuse(p, nf, reflectance, rng, fg, s);
+                    self.shade_diffuse(p, nf, hit.ns, reflectance, rng, fg, s);
                     // Lambertian radiance ρ E / π, times the path's throughput, in one
                     // pass over the bins.
                     debug_assert_eq!(reflectance.len(), s.acc.len());
@@ -469,10 +469,12 @@ impl Gather<'_> {
 
     /// Irradiance at a diffuse point the camera sees, into `s.acc` (the caller turns it
     /// into radiance with the surface's reflectance).
+    #[allow(clippy::too_many_arguments)]
     fn shade_diffuse(
         &self,
         p: Vec3,
         nf: Vec3,
+        ns: Vec3,
         reflectance: &[f32],
         rng: &mut Rng,
         fg: GatherSequence,
@@ -496,7 +498,7 @@ impl Gather<'_> {
         let scene = self.scene;
         let [u, v] = r2(fg.light_index, fg.light_offset);
         let u_light = [rng.next_f32(), u, v];
-        (scene.lights).direct(&scene.tris, &scene.accel, p, nf, u_light, &mut s.tmp);
+        (scene.lights).direct(&scene.tris, &scene.accel, p, nf, ns, u_light, &mut s.tmp);
         spd::add_scaled(&mut s.acc, &s.tmp, 1.0);
         // Caustics from the caustic map (irradiance, like the other two terms).
         if let Some(cm) = self.caustic {
@@ -510,7 +512,7 @@ impl Gather<'_> {
         // with no ray among them — estimates the pixel's indirect light without bias.
         // Pooled: the rays' radiance waits for the block (see [`Gather::block`]).
         if self.pool_gather {
-            self.gather_rays(p, nf, rng, fg, s);
+            self.gather_rays(p, (nf, ns), rng, fg, s);
             let n = s.fg.len();
             let slot = s.slot as usize;
             let hit = PoolHit {
@@ -546,20 +548,32 @@ impl Gather<'_> {
             return;
         }
         if fg.rays > 0 {
-            self.gather_rays(p, nf, rng, fg, s);
+            self.gather_rays(p, (nf, ns), rng, fg, s);
             let samples = self.camera_samples.max(1) as f32;
             let weight = std::f32::consts::PI * samples / self.final_gather_rays as f32;
             spd::add_scaled(&mut s.acc, &s.fg, weight);
         }
     }
 
-    /// The summed radiance of the sample's `fg.rays` final-gather rays from `p` (facing
-    /// `nf`), into `s.fg`: cosine-distributed directions from the pixel's sequence.
-    fn gather_rays(&self, p: Vec3, nf: Vec3, rng: &mut Rng, fg: GatherSequence, s: &mut Scratch) {
+    /// The summed radiance of the sample's `fg.rays` final-gather rays from `p`, into
+    /// `s.fg`: directions from the pixel's sequence, cosine-distributed about the shading
+    /// normal `ns`. A direction below the geometric surface (`nf`, the side seen; only
+    /// where smooth shading tilts `ns` away from it) brings nothing back.
+    fn gather_rays(
+        &self,
+        p: Vec3,
+        (nf, ns): (Vec3, Vec3),
+        rng: &mut Rng,
+        fg: GatherSequence,
+        s: &mut Scratch,
+    ) {
         s.fg.fill(0.0);
         for j in 0..fg.rays {
             let u = sobol02(fg.first.wrapping_add(j), fg.scramble);
-            let dir = cosine_hemisphere(nf, u);
+            let dir = cosine_hemisphere(ns, u);
+            if ns != nf && !(dir.dot(nf) > 0.0) {
+                continue;
+            }
             self.final_gather_ray(self.scene.accel.offset(p, nf, dir), dir, rng, &mut s.ray);
             spd::add_scaled(&mut s.fg, &s.ray.out, 1.0);
         }
