@@ -529,3 +529,32 @@ fn blenders_painted_colour_attributes_load_as_vertex_colours() {
         .unwrap();
     assert_eq!(s.triangle_colors[t], [glam::Vec3::ONE; 3]);
 }
+
+#[test]
+fn cut_outs_and_blended_alpha_are_rendered_opaque_with_a_warning() {
+    // Blender writes alphaMode MASK or BLEND for leaves, decals and "glass" made with
+    // Alpha: prismap renders the surface opaque and says so.
+    let white = [[255u8; 4]; 6].concat();
+    for (mode, words) in [
+        ("MASK", "alphaMode MASK (cut-out) ignored"),
+        ("BLEND", "alphaMode BLEND ignored"),
+    ] {
+        let extra = format!(r#","alphaMode":"{mode}""#);
+        let text = vertex_coloured_quad_gltf((&white, 5121, true, "VEC4"), [1.0; 3], &extra);
+        let s = scene::load_from_slice(text.as_bytes(), "leaf.gltf", None).unwrap();
+        assert!(
+            s.warnings
+                .iter()
+                .any(|w| w.contains("'painted'") && w.contains(words) && w.contains("opaque")),
+            "{mode}: {:?}",
+            s.warnings
+        );
+    }
+    let text = vertex_coloured_quad_gltf((&white, 5121, true, "VEC4"), [1.0; 3], "");
+    let s = scene::load_from_slice(text.as_bytes(), "leaf.gltf", None).unwrap();
+    assert!(
+        s.warnings.iter().all(|w| !w.contains("alphaMode")),
+        "{:?}",
+        s.warnings
+    );
+}

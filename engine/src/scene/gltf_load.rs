@@ -841,6 +841,15 @@ fn read_material(
             ));
         }
     }
+    // Cut-outs and see-through surfaces (Blender: Alpha below 1, or an image's alpha
+    // into it; Blend Mode / Render Method) are not rendered: the surface is opaque.
+    match m.alpha_mode() {
+        gltf::material::AlphaMode::Opaque => {}
+        mode => warnings.push(format!(
+            "{element} '{name}': alphaMode {} ignored: rendered opaque (for glass, use Transmission instead of Alpha)",
+            if mode == gltf::material::AlphaMode::Mask { "MASK (cut-out)" } else { "BLEND" }
+        )),
+    }
     let transmission = m
         .transmission()
         .map(|t| t.transmission_factor())
