@@ -87,6 +87,7 @@ impl Builder {
             base_color_texture: None,
             emissive_texture: None,
             vertex_colors: false,
+            alpha_mask: None,
         });
         self.triangle_material
             .extend(std::iter::repeat_n(m, tris.len()));
@@ -1366,4 +1367,46 @@ fn a_smooth_shaded_diffuse_ball_looks_like_a_finely_tessellated_one() {
     let (flat, smooth) = (mean_abs(&image(12, false)), mean_abs(&image(12, true)));
     println!("mean |coarse − fine|: flat {flat:.5}, smooth {smooth:.5}");
     assert!(smooth < 0.5 * flat, "smooth {smooth} against flat {flat}");
+}
+
+#[test]
+fn a_cut_out_canopy_passes_sunlight_where_it_has_holes() {
+    // glTF alphaMode MASK: a canopy over a sunlit floor. Alpha 0.2 everywhere (below the
+    // 0.5 cutoff): all hole, the floor gets the whole Sun, ρE/π, by shadow rays (fg 4)
+    // and by photons (fg 0). Alpha 0.8: a roof, the floor is dark.
+    use prismap_engine::scene::{AlphaMask, PunctualKind, PunctualLight};
+    let (rho, e) = (0.5, 3.0);
+    for (alpha, exact) in [(0.2f32, rho * e / std::f64::consts::PI), (0.8, 0.0)] {
+        let mut b = Builder::new();
+        b.add(floor_4x4(), diffuse(rho), None);
+        let canopy = floor_4x4()
+            .into_iter()
+            .map(|t| t.map(|v| 1.5 * v + Vec3::Y))
+            .collect();
+        b.add(canopy, diffuse(0.5), None);
+        let mut scene = b.scene(
+            "canopy",
+            Camera::look_at(Vec3::new(0.0, 0.5, 0.0), Vec3::ZERO, Vec3::Z, 0.8),
+        );
+        scene.materials[1].alpha_mask = Some(AlphaMask {
+            cutoff: 0.5,
+            factor: alpha,
+        });
+        scene.lights.push(PunctualLight {
+            name: "Sun".into(),
+            position: Vec3::ZERO,
+            kind: PunctualKind::Directional {
+                direction: -Vec3::Y,
+            },
+            intensity: Spectrum::Constant(e),
+        });
+        for fg in [0, 4] {
+            let mean = mean_luminance(&scene, settings(Storage::Compact, 8, fg, 16, 40_000), 4);
+            println!("alpha {alpha} fg {fg}: floor {mean:.4} (exact {exact:.4})");
+            assert!(
+                (mean - exact).abs() < 0.03 * rho * e / std::f64::consts::PI,
+                "alpha {alpha} fg {fg}: {mean} against {exact}"
+            );
+        }
+    }
 }

@@ -531,30 +531,106 @@ fn blenders_painted_colour_attributes_load_as_vertex_colours() {
 }
 
 #[test]
-fn cut_outs_and_blended_alpha_are_rendered_opaque_with_a_warning() {
-    // Blender writes alphaMode MASK or BLEND for leaves, decals and "glass" made with
-    // Alpha: prismap renders the surface opaque and says so.
+fn blended_alpha_is_rendered_opaque_with_a_warning_and_masks_load_as_cut_outs() {
+    // Blender writes alphaMode BLEND for decals and "glass" made with Alpha: prismap
+    // renders the surface opaque and says so. MASK (leaves, fences) is a cut-out.
     let white = [[255u8; 4]; 6].concat();
-    for (mode, words) in [
-        ("MASK", "alphaMode MASK (cut-out) ignored"),
-        ("BLEND", "alphaMode BLEND ignored"),
-    ] {
-        let extra = format!(r#","alphaMode":"{mode}""#);
-        let text = vertex_coloured_quad_gltf((&white, 5121, true, "VEC4"), [1.0; 3], &extra);
-        let s = scene::load_from_slice(text.as_bytes(), "leaf.gltf", None).unwrap();
-        assert!(
-            s.warnings
-                .iter()
-                .any(|w| w.contains("'painted'") && w.contains(words) && w.contains("opaque")),
-            "{mode}: {:?}",
-            s.warnings
-        );
-    }
-    let text = vertex_coloured_quad_gltf((&white, 5121, true, "VEC4"), [1.0; 3], "");
-    let s = scene::load_from_slice(text.as_bytes(), "leaf.gltf", None).unwrap();
+    let load = |extra: &str| {
+        let text = vertex_coloured_quad_gltf((&white, 5121, true, "VEC4"), [1.0; 3], extra);
+        scene::load_from_slice(text.as_bytes(), "leaf.gltf", None).unwrap()
+    };
+    let s = load(r#","alphaMode":"BLEND""#);
+    assert!(
+        s.warnings.iter().any(|w| w.contains("'painted'")
+            && w.contains("alphaMode BLEND ignored")
+            && w.contains("opaque")),
+        "{:?}",
+        s.warnings
+    );
+    assert!(s.materials[0].alpha_mask.is_none());
+    let s = load(r#","alphaMode":"MASK","alphaCutoff":0.3"#);
     assert!(
         s.warnings.iter().all(|w| !w.contains("alphaMode")),
         "{:?}",
         s.warnings
     );
+    assert_eq!(
+        s.materials[0].alpha_mask,
+        Some(scene::AlphaMask {
+            cutoff: 0.3,
+            factor: 1.0
+        })
+    );
+    let s = load("");
+    assert!(
+        s.warnings.iter().all(|w| !w.contains("alphaMode")),
+        "{:?}",
+        s.warnings
+    );
+    assert!(s.materials[0].alpha_mask.is_none());
+}
+
+/// [`textured_quad_gltf`]'s quad with an RGBA texture: black texels of alpha `alpha`
+/// (row-major 2×2), and alphaMode MASK.
+fn masked_quad_gltf(alpha: [u8; 4]) -> String {
+    let mut img = image::RgbaImage::new(2, 2);
+    for (i, a) in alpha.iter().enumerate() {
+        img.put_pixel((i % 2) as u32, (i / 2) as u32, image::Rgba([0, 0, 0, *a]));
+    }
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    let b64 = base64::engine::general_purpose::STANDARD;
+    let text = textured_quad_gltf("");
+    let start = text.find("data:image/png;base64,").unwrap() + "data:image/png;base64,".len();
+    let end = start + text[start..].find('"').unwrap();
+    let text = format!("{}{}{}", &text[..start], b64.encode(png), &text[end..]);
+    text.replace(
+        r#""metallicFactor":0}"#,
+        r#""metallicFactor":0},"alphaMode":"MASK""#,
+    )
+}
+
+#[test]
+fn alpha_mask_cut_outs_let_rays_and_light_through_their_holes() {
+    // A black quad under the default sky (radiance 1), its texture's alpha 1, 0 / 0, 1
+    // (cutoff 0.5): through the two holes the camera sees the sky, the two solid quarters
+    // are black. Photons, shadow rays and camera rays all go through the same test.
+    let s = scene::load_from_slice(
+        masked_quad_gltf([255, 0, 0, 255]).as_bytes(),
+        "leaf.gltf",
+        None,
+    )
+    .unwrap();
+    assert!(s.materials[0].alpha_mask.is_some());
+    assert!(
+        s.warnings.iter().all(|w| !w.contains("alphaMode")),
+        "{:?}",
+        s.warnings
+    );
+    let settings = RenderSettings {
+        bins: 8,
+        storage: Storage::Compact,
+        width: 32,
+        height: 32,
+        photons_per_pass: 5_000,
+        final_gather_rays: 4,
+        ..RenderSettings::default()
+    };
+    let mut r = RenderSession::new(&s, settings).unwrap();
+    for _ in 0..2 {
+        r.run_pass().unwrap();
+    }
+    let img = r.image();
+    let lum = |p: [f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+    for (i, hole) in [false, true, true, false].into_iter().enumerate() {
+        let (x, y) = (8 + 16 * (i as u32 % 2), 8 + 16 * (i as u32 / 2));
+        let l = lum(img.get(x, y));
+        println!("quarter {i}: luminance {l} (hole {hole})");
+        if hole {
+            assert!((l - 1.0).abs() < 0.02, "quarter {i}: {l}, the sky expected");
+        } else {
+            assert!(l < 0.01, "quarter {i}: {l}, black expected");
+        }
+    }
 }

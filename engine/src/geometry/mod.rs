@@ -154,6 +154,15 @@ pub struct Accel {
     ids: Vec<u32>,
     /// Scene bounds' diagonal length, for ray offsets.
     diagonal: f32,
+    /// Triangles with holes (glTF alphaMode MASK), if any: see [`Cutouts`].
+    cutouts: Option<(Vec<bool>, std::sync::Arc<dyn Cutouts>)>,
+}
+
+/// Where triangles have holes: a ray passes through triangle `prim` (scene order) at the
+/// point `p` on it when `passes` says so (glTF's alpha cut-outs, for leaves and fences).
+/// Both closest-hit and shadow rays ask it, during traversal.
+pub trait Cutouts: Send + Sync {
+    fn passes(&self, prim: u32, p: Vec3) -> bool;
 }
 
 impl Accel {
@@ -186,6 +195,7 @@ impl Accel {
                 tris: Vec::new(),
                 ids: Vec::new(),
                 diagonal,
+                cutouts: None,
             };
         }
         let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
@@ -203,6 +213,34 @@ impl Accel {
             tris,
             ids,
             diagonal,
+            cutouts: None,
+        }
+    }
+
+    /// Gives the triangles flagged in `holed` (scene order) holes where `cutouts` says.
+    pub fn set_cutouts(&mut self, holed: &[bool], cutouts: std::sync::Arc<dyn Cutouts>) {
+        let by_leaf: Vec<bool> = self
+            .ids
+            .iter()
+            .map(|&i| holed.get(i as usize).copied().unwrap_or(false))
+            .collect();
+        self.cutouts = by_leaf.iter().any(|&h| h).then_some((by_leaf, cutouts));
+    }
+
+    /// Triangle `id` (BVH order) against `r`: its distance, or ∞ for a miss or a hole.
+    #[inline(always)]
+    fn test(&self, r: &obvhs::ray::Ray, id: usize) -> f32 {
+        let t = self.tris[id].intersect(r);
+        match &self.cutouts {
+            Some((holed, cut)) if holed[id] && t.is_finite() => {
+                let p = Vec3::from(r.origin + r.direction * t);
+                if cut.passes(self.ids[id], p) {
+                    f32::INFINITY
+                } else {
+                    t
+                }
+            }
+            _ => t,
         }
     }
 
@@ -220,7 +258,7 @@ impl Accel {
         let mut hit = RayHit::none();
         if self
             .bvh
-            .ray_traverse(ray, &mut hit, |r, id| self.tris[id].intersect(r))
+            .ray_traverse(ray, &mut hit, |r, id| self.test(r, id))
         {
             Some(Hit {
                 t: (hit.t - BACK_OFF).max(0.0),
@@ -238,9 +276,7 @@ impl Accel {
             return false;
         }
         let ray = backed_off_ray(origin, dir, t_max);
-        !self
-            .bvh
-            .ray_traverse_miss(ray, |r, id| self.tris[id].intersect(r))
+        !self.bvh.ray_traverse_miss(ray, |r, id| self.test(r, id))
     }
 
     /// Moves `p` off a surface with normal `n` to the side of `dir`, by an amount that grows

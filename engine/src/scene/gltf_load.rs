@@ -275,6 +275,7 @@ fn read_texture(
     ctx: &Ctx,
     element: &str,
     warnings: &mut Vec<String>,
+    keep_alpha: bool,
 ) -> Result<super::texture::TextureRef, SceneError> {
     use super::texture::{MAX_TEXTURE_SIDE, Texture, TextureRef, Wrap, uv_transform};
     let tex = info.texture();
@@ -315,15 +316,23 @@ fn read_texture(
     limits.max_image_width = Some(MAX_TEXTURE_SIDE);
     limits.max_image_height = Some(MAX_TEXTURE_SIDE);
     reader.limits(limits);
-    let img = reader
-        .decode()
-        .map_err(|e| {
-            ctx.err(
-                &el,
-                format!("cannot decode the image (PNG and JPEG are read): {e}"),
-            )
-        })?
-        .to_rgb8();
+    let decoded = reader.decode().map_err(|e| {
+        ctx.err(
+            &el,
+            format!("cannot decode the image (PNG and JPEG are read): {e}"),
+        )
+    })?;
+    // Alpha is linear in glTF (only the colour is sRGB-encoded).
+    let alpha = if keep_alpha && decoded.color().has_alpha() {
+        decoded
+            .to_rgba8()
+            .pixels()
+            .map(|p| p.0[3] as f32 / 255.0)
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let img = decoded.to_rgb8();
     let decode = |v: u8| crate::spectral::color::srgb_decode(v as f32 / 255.0);
     let texels = img.pixels().map(|p| p.0.map(decode)).collect();
     let sampler = tex.sampler();
@@ -358,6 +367,7 @@ fn read_texture(
             width: img.width(),
             height: img.height(),
             texels,
+            alpha,
             wrap: (wrap(sampler.wrap_s()), wrap(sampler.wrap_t())),
             linear,
         }),
@@ -811,6 +821,7 @@ fn read_material(
         &element,
         "baseColorFactor",
     )?;
+    let masked = m.alpha_mode() == gltf::material::AlphaMode::Mask;
     let base_color_texture = match pbr.base_color_texture() {
         Some(info) => Some(read_texture(
             &info,
@@ -819,6 +830,7 @@ fn read_material(
             ctx,
             &element,
             warnings,
+            masked,
         )?),
         None => None,
     };
@@ -841,14 +853,32 @@ fn read_material(
             ));
         }
     }
-    // Cut-outs and see-through surfaces (Blender: Alpha below 1, or an image's alpha
-    // into it; Blend Mode / Render Method) are not rendered: the surface is opaque.
-    match m.alpha_mode() {
-        gltf::material::AlphaMode::Opaque => {}
-        mode => warnings.push(format!(
-            "{element} '{name}': alphaMode {} ignored: rendered opaque (for glass, use Transmission instead of Alpha)",
-            if mode == gltf::material::AlphaMode::Mask { "MASK (cut-out)" } else { "BLEND" }
-        )),
+    // Cut-outs (MASK: leaves, fences) have holes where alpha = factor × texel alpha is
+    // below the cutoff. See-through blending (BLEND; Blender: Alpha below 1 or an image's
+    // alpha into it) is not rendered: the surface is opaque.
+    let alpha_mask = if masked {
+        let cutoff = m.alpha_cutoff().unwrap_or(0.5);
+        if !cutoff.is_finite() {
+            return Err(ctx.err(
+                format!("{element}.alphaCutoff"),
+                format!("value {cutoff} is not finite"),
+            ));
+        }
+        let factor = base[3];
+        if !factor.is_finite() {
+            return Err(ctx.err(
+                format!("{element}.pbrMetallicRoughness.baseColorFactor[3]"),
+                format!("value {factor} is not finite"),
+            ));
+        }
+        Some(super::AlphaMask { cutoff, factor })
+    } else {
+        None
+    };
+    if m.alpha_mode() == gltf::material::AlphaMode::Blend {
+        warnings.push(format!(
+            "{element} '{name}': alphaMode BLEND ignored: rendered opaque (for glass, use Transmission instead of Alpha; for cut-outs, alphaMode MASK)"
+        ));
     }
     let transmission = m
         .transmission()
@@ -926,6 +956,7 @@ fn read_material(
             ctx,
             &element,
             warnings,
+            false,
         )?),
         _ => None,
     };
@@ -938,6 +969,7 @@ fn read_material(
         base_color_texture,
         emissive_texture,
         vertex_colors: false,
+        alpha_mask,
     })
 }
 

@@ -69,6 +69,18 @@ pub struct Material {
     /// colour is multiplied per hit by the colour interpolated between the triangle's
     /// corners (glTF: factor × texture × `COLOR_0`; see [`Scene::triangle_colors`]).
     pub vertex_colors: bool,
+    /// glTF alphaMode MASK: holes where factor × the base-colour texture's alpha is below
+    /// the cutoff (rays pass through them).
+    pub alpha_mask: Option<AlphaMask>,
+}
+
+/// A cut-out material's alpha test (glTF alphaMode MASK).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AlphaMask {
+    /// glTF alphaCutoff (default 0.5): alpha below it is a hole.
+    pub cutoff: f32,
+    /// The base colour factor's alpha.
+    pub factor: f32,
 }
 
 /// Beer–Lambert absorption inside a closed glass: after `distance` scene units inside,

@@ -141,9 +141,13 @@ impl SpectralScene {
                 }
             )
         });
+        let mut accel = Accel::new(&scene.triangles);
+        if let Some((holed, cutouts)) = AlphaCutouts::of(scene, &tris) {
+            accel.set_cutouts(&holed, std::sync::Arc::new(cutouts));
+        }
         Self {
             name: scene.name.clone(),
-            accel: Accel::new(&scene.triangles),
+            accel,
             lights: LightSet::new(lights, &tris),
             environment,
             grid,
@@ -299,6 +303,85 @@ pub fn path_eta(
         eta_in_bin(eta, eta_edges, bin, u)
     } else {
         eta[bin]
+    }
+}
+
+/// The holes of cut-out materials (glTF alphaMode MASK), as the BVH asks for them.
+struct AlphaCutouts {
+    /// Per scene triangle: its index in `tris`, or `u32::MAX` if it has no holes.
+    slot: Vec<u32>,
+    /// The holed triangles: geometry (for barycentrics), texture coordinates, mask.
+    tris: Vec<(TriData, [glam::Vec2; 3], u32)>,
+    /// Per material with holes: its test and the texture whose alpha it reads.
+    masks: Vec<(super::AlphaMask, Option<TextureRef>)>,
+}
+
+impl AlphaCutouts {
+    /// The scene's holes, with which triangles have them; None when none can have any.
+    fn of(scene: &Scene, tris: &[TriData]) -> Option<(Vec<bool>, Self)> {
+        let mut mask_of = vec![u32::MAX; scene.materials.len()];
+        let mut masks = Vec::new();
+        for (i, m) in scene.materials.iter().enumerate() {
+            let Some(mask) = m.alpha_mask else { continue };
+            let tex = m
+                .base_color_texture
+                .clone()
+                .filter(|t| !t.texture.alpha.is_empty());
+            // A factor at or above the cutoff with no alpha texture: no hole anywhere.
+            if tex.is_none() && mask.factor >= mask.cutoff {
+                continue;
+            }
+            mask_of[i] = masks.len() as u32;
+            masks.push((mask, tex));
+        }
+        if masks.is_empty() {
+            return None;
+        }
+        let has_uvs = scene.triangle_uvs.len() == scene.triangles.len();
+        let mut slot = vec![u32::MAX; tris.len()];
+        let mut holed_tris = Vec::new();
+        for (i, t) in tris.iter().enumerate() {
+            let m = mask_of[t.material as usize];
+            if m == u32::MAX {
+                continue;
+            }
+            let uv = if has_uvs {
+                scene.triangle_uvs[i]
+            } else {
+                [glam::Vec2::ZERO; 3]
+            };
+            slot[i] = holed_tris.len() as u32;
+            holed_tris.push((*t, uv, m));
+        }
+        let holed = slot.iter().map(|&s| s != u32::MAX).collect();
+        Some((
+            holed,
+            Self {
+                slot,
+                tris: holed_tris,
+                masks,
+            },
+        ))
+    }
+}
+
+impl crate::geometry::Cutouts for AlphaCutouts {
+    fn passes(&self, prim: u32, p: Vec3) -> bool {
+        let Some((tri, uv, m)) = self
+            .slot
+            .get(prim as usize)
+            .and_then(|&s| self.tris.get(s as usize))
+        else {
+            return false;
+        };
+        let (mask, tex) = &self.masks[*m as usize];
+        let mut alpha = mask.factor;
+        if let Some(tex) = tex {
+            let (b1, b2) = tri.barycentric(p);
+            alpha *= tex.sample_alpha(uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2);
+        }
+        // A NaN alpha (never from a checked file) is a hole, not a wall.
+        !(alpha >= mask.cutoff)
     }
 }
 

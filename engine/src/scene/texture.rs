@@ -23,6 +23,8 @@ pub struct Texture {
     pub width: u32,
     pub height: u32,
     pub texels: Vec<[f32; 3]>,
+    /// Alpha per texel (linear), kept only where a cut-out needs it; empty: opaque.
+    pub alpha: Vec<f32>,
     pub wrap: (Wrap, Wrap),
     /// Bilinear magnification (else nearest).
     pub linear: bool,
@@ -54,6 +56,39 @@ impl Texture {
         Vec3::from(self.texels[(y * w + x) as usize])
     }
 
+    fn alpha_texel(&self, x: i64, y: i64) -> f32 {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let (x, y) = (wrap(x, w, self.wrap.0), wrap(y, h, self.wrap.1));
+        self.alpha[(y * w + x) as usize]
+    }
+
+    /// The alpha at texture coordinates `uv`, filtered as the colour is (1 without an
+    /// alpha channel; 0 at non-finite coordinates, as the colour is black there).
+    pub fn sample_alpha(&self, uv: Vec2) -> f32 {
+        if self.alpha.is_empty() {
+            return 1.0;
+        }
+        if !uv.is_finite() {
+            return 0.0;
+        }
+        let (fx, fy) = (uv.x * self.width as f32, uv.y * self.height as f32);
+        if !self.linear {
+            return self.alpha_texel(fx.floor() as i64, fy.floor() as i64);
+        }
+        let (x, y) = (fx - 0.5, fy - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (tx, ty) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+        let top = lerp(self.alpha_texel(x0, y0), self.alpha_texel(x0 + 1, y0), tx);
+        let bottom = lerp(
+            self.alpha_texel(x0, y0 + 1),
+            self.alpha_texel(x0 + 1, y0 + 1),
+            tx,
+        );
+        lerp(top, bottom, ty)
+    }
+
     /// The colour at texture coordinates `uv`.
     pub fn sample(&self, uv: Vec2) -> [f32; 3] {
         if !uv.is_finite() || self.texels.is_empty() {
@@ -77,6 +112,11 @@ impl TextureRef {
     pub fn sample(&self, uv: Vec2) -> [f32; 3] {
         let t = self.transform * uv.extend(1.0);
         self.texture.sample(Vec2::new(t.x, t.y))
+    }
+
+    pub fn sample_alpha(&self, uv: Vec2) -> f32 {
+        let t = self.transform * uv.extend(1.0);
+        self.texture.sample_alpha(Vec2::new(t.x, t.y))
     }
 }
 
@@ -103,6 +143,7 @@ mod tests {
                 [0.0, 0.0, 1.0],
                 [1.0, 1.0, 1.0],
             ],
+            alpha: vec![],
             wrap: (wrap, wrap),
             linear,
         }
