@@ -634,3 +634,39 @@ fn alpha_mask_cut_outs_let_rays_and_light_through_their_holes() {
         }
     }
 }
+
+#[test]
+fn blenders_alpha_clipped_leaf_loads_as_a_cut_out_with_its_holes() {
+    // scenes/blender/cut-out-leaves.glb (make_blender_fixtures.py, Blender 5.0): an image's
+    // alpha through Math Greater Than 0.5 into Alpha exports as alphaMode MASK; the packed
+    // 32×32 image keeps its alpha: exactly the texels of its four round holes are below 0.5.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes/blender/cut-out-leaves.glb");
+    let s = scene::load(&path).unwrap();
+    assert!(
+        s.warnings.iter().all(|w| !w.contains("alpha")),
+        "{:?}",
+        s.warnings
+    );
+    let leaf = s.materials.iter().find(|m| m.name == "leaf").unwrap();
+    assert_eq!(
+        leaf.alpha_mask,
+        Some(scene::AlphaMask {
+            cutoff: 0.5,
+            factor: 1.0
+        })
+    );
+    let tex = &leaf.base_color_texture.as_ref().unwrap().texture;
+    let holes = tex.alpha.iter().filter(|&&a| a < 0.5).count();
+    let expected = (0..32 * 32)
+        .filter(|i| {
+            let (x, y) = ((i % 32) as i32, (i / 32) as i32);
+            [8, 24].iter().any(|cx| {
+                [8, 24]
+                    .iter()
+                    .any(|cy| (x - cx).pow(2) + (y - cy).pow(2) < 25)
+            })
+        })
+        .count();
+    assert_eq!(holes, expected);
+}

@@ -21,6 +21,10 @@ Writes, beside this script:
                           its position) feeds the Base Color through a Color Attribute
                           node (exported as COLOR_0), beside a cube painted one colour per
                           face (corner domain), on a grey ground
+- cut-out-leaves.glb      under a Sun, a 2 m "leaf" plane whose packed RGBA image has
+                          round holes (alpha 0 inside circles), its alpha through a Math
+                          Greater Than 0.5 node into Alpha: exported as alphaMode MASK
+                          with alphaCutoff 0.5; the holes let sunlight onto the ground
 
 One fixture alone: give its name, e.g. `... make_blender_fixtures.py vertex-painted`.
 """
@@ -269,6 +273,47 @@ def vertex_painted():
     export("vertex-painted.glb")
 
 
+def cut_out_leaves():
+    startup()
+    for n in ("Cube", "Light"):
+        bpy.data.objects.remove(bpy.data.objects[n])
+    size = 32
+    img = bpy.data.images.new("holes", size, size, alpha=True)
+    px = []
+    for y in range(size):
+        for x in range(size):
+            # Four round holes of radius 5 texels in a green sheet.
+            hole = any((x - cx) ** 2 + (y - cy) ** 2 < 25 for cx in (8, 24) for cy in (8, 24))
+            px += [0.1, 0.5, 0.1, 0.0 if hole else 1.0]
+    img.pixels = px
+    img.pack()
+    m = material("leaf", (1, 1, 1))
+    nodes, links = m.node_tree.nodes, m.node_tree.links
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.interpolation = "Closest"
+    bsdf = nodes["Principled BSDF"]
+    links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    clip = nodes.new("ShaderNodeMath")
+    clip.operation = "GREATER_THAN"
+    clip.inputs[1].default_value = 0.5
+    links.new(tex.outputs["Alpha"], clip.inputs[0])
+    links.new(clip.outputs["Value"], bsdf.inputs["Alpha"])
+    bpy.ops.mesh.primitive_plane_add(size=2, location=(0, 0, 1.2))
+    bpy.context.object.data.materials.append(m)
+    bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, 0))
+    bpy.context.object.data.materials.append(material("ground", (0.6, 0.6, 0.6)))
+    sun = bpy.data.lights.new("Sun", type="SUN")
+    sun.energy = 3.0
+    obj = bpy.data.objects.new("Sun", sun)
+    obj.rotation_euler = (math.radians(10), 0, 0)
+    bpy.context.collection.objects.link(obj)
+    cam = bpy.data.objects["Camera"]
+    cam.location = (0.0, -4.0, 3.5)
+    cam.rotation_euler = direction_to_euler((0.0, 4.0, -3.2))
+    export("cut-out-leaves.glb")
+
+
 def direction_to_euler(d):
     from mathutils import Vector
     return Vector(d).to_track_quat("-Z", "Y").to_euler()
@@ -281,6 +326,7 @@ FIXTURES = {
     "textured-glass": textured_glass,
     "rough-materials": rough_materials,
     "vertex-painted": vertex_painted,
+    "cut-out-leaves": cut_out_leaves,
 }
 
 if __name__ == "__main__":
