@@ -658,9 +658,9 @@ fn blenders_alpha_clipped_leaf_loads_as_a_cut_out_with_its_holes() {
     );
     let tex = &leaf.base_color_texture.as_ref().unwrap().texture;
     let holes = tex.alpha.iter().filter(|&&a| a < 0.5).count();
-    let expected = (0..32 * 32)
+    let expected = (0..32 * 32i32)
         .filter(|i| {
-            let (x, y) = ((i % 32) as i32, (i / 32) as i32);
+            let (x, y) = (i % 32, i / 32);
             [8, 24].iter().any(|cx| {
                 [8, 24]
                     .iter()
