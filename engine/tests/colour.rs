@@ -92,6 +92,7 @@ fn chart(material: impl Fn([f64; 3]) -> (MaterialKind, Option<Spectrum>)) -> Sce
             emissive_texture: None,
             vertex_colors: false,
             alpha_mask: None,
+            normal_texture: None,
         });
         let c = centre(i);
         let p = |x: f32, y: f32| c + Vec3::new(x, y, 0.0);

@@ -365,6 +365,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
             emissive_texture: None,
             vertex_colors: false,
             alpha_mask: None,
+            normal_texture: None,
         }],
         lights: vec![],
         camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 1.0),

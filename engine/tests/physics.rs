@@ -88,6 +88,7 @@ impl Builder {
             emissive_texture: None,
             vertex_colors: false,
             alpha_mask: None,
+            normal_texture: None,
         });
         self.triangle_material
             .extend(std::iter::repeat_n(m, tris.len()));
@@ -1408,5 +1409,61 @@ fn a_cut_out_canopy_passes_sunlight_where_it_has_holes() {
                 "alpha {alpha} fg {fg}: {mean} against {exact}"
             );
         }
+    }
+}
+
+#[test]
+fn a_normal_map_tilts_the_shading_normal_the_way_gltf_defines_it() {
+    // A floor with texture coordinates u = (x + 2)/4, v = (z + 2)/4 and a one-texel normal
+    // map of tangent-space normal m tilted 30° — towards +u (red) or towards −v, up the
+    // image (green: glTF's normal maps are +y up). A Sun 30° off vertical lights it: from
+    // the side the normal leans to, the cosine is 1 (ρE/π); from the other, cos 60° = ½;
+    // without the map, cos 30°.
+    use prismap_engine::scene::texture::{Texture, TextureRef, Wrap};
+    use prismap_engine::scene::{PunctualKind, PunctualLight};
+    let (rho, e) = (0.5, 3.0);
+    let (s, c) = (0.5f32, 30f32.to_radians().cos());
+    let map = |m: Vec3| TextureRef {
+        texture: std::sync::Arc::new(Texture {
+            width: 1,
+            height: 1,
+            texels: vec![(0.5 * (m + Vec3::ONE)).to_array()],
+            alpha: vec![],
+            wrap: (Wrap::Repeat, Wrap::Repeat),
+            linear: false,
+        }),
+        transform: glam::Mat3::IDENTITY,
+    };
+    // (normal map, Sun direction, expected cosine)
+    let cases = [
+        (None, Vec3::new(-s, -c, 0.0), c),
+        (Some(Vec3::new(s, 0.0, c)), Vec3::new(-s, -c, 0.0), 1.0),
+        (Some(Vec3::new(s, 0.0, c)), Vec3::new(s, -c, 0.0), 0.5),
+        (Some(Vec3::new(0.0, s, c)), Vec3::new(0.0, -c, s), 1.0),
+        (Some(Vec3::new(0.0, s, c)), Vec3::new(0.0, -c, -s), 0.5),
+    ];
+    for (m, sun, cos) in cases {
+        let mut b = Builder::new();
+        b.add(floor_4x4(), diffuse(rho), None);
+        let mut scene = b.scene(
+            "normal-mapped-floor",
+            Camera::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::ZERO, Vec3::Z, 0.5),
+        );
+        let uv = |p: Vec3| glam::Vec2::new((p.x + 2.0) / 4.0, (p.z + 2.0) / 4.0);
+        scene.triangle_uvs = scene.triangles.iter().map(|t| t.map(uv)).collect();
+        scene.materials[0].normal_texture = m.map(|m| (map(m), 1.0));
+        scene.lights.push(PunctualLight {
+            name: "Sun".into(),
+            position: Vec3::ZERO,
+            kind: PunctualKind::Directional { direction: sun },
+            intensity: Spectrum::Constant(e),
+        });
+        let exact = rho * e * f64::from(cos) / std::f64::consts::PI;
+        let mean = mean_luminance(&scene, settings(Storage::Compact, 8, 4, 16, 20_000), 2);
+        println!("map {m:?} sun {sun:?}: {mean:.4} (exact {exact:.4})");
+        assert!(
+            (mean / exact - 1.0).abs() < 2e-3,
+            "map {m:?} sun {sun:?}: {mean} against ρE·cos/π = {exact}"
+        );
     }
 }

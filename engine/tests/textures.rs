@@ -670,3 +670,69 @@ fn blenders_alpha_clipped_leaf_loads_as_a_cut_out_with_its_holes() {
         .count();
     assert_eq!(holes, expected);
 }
+
+#[test]
+fn a_normal_texture_loads_linear_with_its_scale() {
+    // glTF normalTexture: data, not colour, so its bytes are read as they are (the colour
+    // textures' sRGB decoding would bend every normal), with its scale; a non-finite scale is an error naming the file.
+    let text = textured_quad_gltf("").replace(
+        r#""pbrMetallicRoughness":{"baseColorTexture":{"index":0},"metallicFactor":0}"#,
+        r#""pbrMetallicRoughness":{"metallicFactor":0},"normalTexture":{"index":0,"scale":0.7}"#,
+    );
+    assert!(text.contains("normalTexture"));
+    let s = scene::load_from_slice(text.as_bytes(), "bumpy.gltf", None).unwrap();
+    assert!(
+        s.warnings.iter().all(|w| !w.contains("normalTexture")),
+        "{:?}",
+        s.warnings
+    );
+    let (tex, scale) = s.materials[0].normal_texture.as_ref().unwrap();
+    assert_eq!(*scale, 0.7);
+    for (got, c) in tex.texture.texels.iter().zip(TEXELS) {
+        let want = c.map(|v| prismap_engine::spectral::color::srgb8(v) as f32 / 255.0);
+        assert_eq!(*got, want);
+    }
+    // JSON has no NaN; an overflowing number is its nearest way to write a non-finite one.
+    let bad = text.replace(r#""scale":0.7"#, r#""scale":1e999"#);
+    let e = scene::load_from_slice(bad.as_bytes(), "bumpy.gltf", None)
+        .unwrap_err()
+        .to_string();
+    println!("{e}");
+    assert!(e.contains("bumpy.gltf"), "{e}");
+}
+
+#[test]
+fn blenders_normal_map_loads_with_tangents_from_its_texture_coordinates() {
+    // scenes/blender/normal-mapped.glb (make_blender_fixtures.py, Blender 5.0): a Normal
+    // Map node exports as normalTexture (with a TANGENT attribute, which prismap does not
+    // read: the frame comes from the texture coordinates). On the plane, ∂p/∂u and −∂p/∂v
+    // are perpendicular and in the plane.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes/blender/normal-mapped.glb");
+    let s = scene::load(&path).unwrap();
+    assert!(
+        s.warnings.iter().all(|w| !w.contains("normal")),
+        "{:?}",
+        s.warnings
+    );
+    assert!(s.materials[0].normal_texture.is_some());
+    let ss = prismap_engine::scene::SpectralScene::new(
+        &s,
+        prismap_engine::spectral::BinGrid::with_bins(4).unwrap(),
+    );
+    assert_eq!(ss.tangents.len(), s.triangles.len());
+    for (i, [t, b]) in ss.tangents.iter().enumerate() {
+        let n = ss.tris[i].normal;
+        assert!(t.length() > 0.0 && b.length() > 0.0, "triangle {i}");
+        for v in [t, b] {
+            assert!(
+                v.normalize().dot(n).abs() < 1e-5,
+                "triangle {i}: {v} off the plane"
+            );
+        }
+        assert!(
+            t.normalize().dot(b.normalize()).abs() < 1e-5,
+            "triangle {i}"
+        );
+    }
+}

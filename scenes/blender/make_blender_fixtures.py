@@ -25,6 +25,9 @@ Writes, beside this script:
                           round holes (alpha 0 inside circles), its alpha through a Math
                           Greater Than 0.5 node into Alpha: exported as alphaMode MASK
                           with alphaCutoff 0.5; the holes let sunlight onto the ground
+- normal-mapped.glb       under a low Sun, a 4 m plane whose packed 64×64 normal map (a
+                          Normal Map node, tangent space) encodes ridges running along v,
+                          h = sin(8πu): exported as normalTexture, with tangents
 
 One fixture alone: give its name, e.g. `... make_blender_fixtures.py vertex-painted`.
 """
@@ -40,9 +43,10 @@ def startup():
     bpy.ops.wm.read_factory_settings(use_empty=False)
 
 
-def export(name, lights=True):
+def export(name, lights=True, tangents=False):
     bpy.ops.export_scene.gltf(
         filepath=os.path.join(HERE, name),
+        export_tangents=tangents,
         export_format="GLB",
         export_lights=lights,
         export_cameras=True,
@@ -314,6 +318,45 @@ def cut_out_leaves():
     export("cut-out-leaves.glb")
 
 
+def normal_mapped():
+    startup()
+    for n in ("Cube", "Light"):
+        bpy.data.objects.remove(bpy.data.objects[n])
+    size = 64
+    img = bpy.data.images.new("ridges", size, size, alpha=False, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    px = []
+    for y in range(size):
+        for x in range(size):
+            u = (x + 0.5) / size
+            slope = 0.6 * math.cos(8 * math.pi * u)  # dh/du, scaled
+            nx, nz = -slope, 1.0
+            norm = math.hypot(nx, nz)
+            px += [0.5 + 0.5 * nx / norm, 0.5, 0.5 + 0.5 * nz / norm, 1.0]
+    img.pixels = px
+    img.pack()
+    m = material("ridged", (0.8, 0.8, 0.8))
+    nodes, links = m.node_tree.nodes, m.node_tree.links
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    nmap = nodes.new("ShaderNodeNormalMap")
+    links.new(tex.outputs["Color"], nmap.inputs["Color"])
+    links.new(nmap.outputs["Normal"], nodes["Principled BSDF"].inputs["Normal"])
+    bpy.ops.mesh.primitive_plane_add(size=4, location=(0, 0, 0))
+    bpy.context.object.data.materials.append(m)
+    sun = bpy.data.lights.new("Sun", type="SUN")
+    sun.energy = 3.0
+    obj = bpy.data.objects.new("Sun", sun)
+    obj.rotation_euler = (0, math.radians(60), 0)
+    bpy.context.collection.objects.link(obj)
+    cam = bpy.data.objects["Camera"]
+    cam.location = (0.0, -4.0, 4.0)
+    cam.rotation_euler = direction_to_euler((0.0, 4.0, -4.0))
+    # With its TANGENT attribute, which the validator asks of a normal-mapped mesh
+    # (prismap does not read it: its frame comes from the texture coordinates).
+    export("normal-mapped.glb", tangents=True)
+
+
 def direction_to_euler(d):
     from mathutils import Vector
     return Vector(d).to_track_quat("-Z", "Y").to_euler()
@@ -327,6 +370,7 @@ FIXTURES = {
     "rough-materials": rough_materials,
     "vertex-painted": vertex_painted,
     "cut-out-leaves": cut_out_leaves,
+    "normal-mapped": normal_mapped,
 }
 
 if __name__ == "__main__":

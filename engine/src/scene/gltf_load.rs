@@ -266,10 +266,19 @@ fn push_per_triangle<T: Copy>(
     }
 }
 
+/// Where a material reads a texture: a colour texture's `Info`, or a normal texture
+/// (which has no `KHR_texture_transform` accessor in the gltf crate, and holds data, not
+/// sRGB colour).
+enum TexSource<'a> {
+    Colour(gltf::texture::Info<'a>),
+    Normal(gltf::material::NormalTexture<'a>),
+}
+
 /// A texture from a glTF texture reference: decoded (PNG or JPEG, at most
-/// `MAX_TEXTURE_SIDE` a side), sRGB-decoded to linear, with its sampler and transform.
+/// `MAX_TEXTURE_SIDE` a side), colour sRGB-decoded to linear (normal maps kept as
+/// stored), with its sampler and transform.
 fn read_texture(
-    info: &gltf::texture::Info,
+    source: TexSource,
     field: &str,
     buffers: &[gltf::buffer::Data],
     ctx: &Ctx,
@@ -278,7 +287,15 @@ fn read_texture(
     keep_alpha: bool,
 ) -> Result<super::texture::TextureRef, SceneError> {
     use super::texture::{MAX_TEXTURE_SIDE, Texture, TextureRef, Wrap, uv_transform};
-    let tex = info.texture();
+    let (tex, tex_coord, texture_transform, srgb) = match &source {
+        TexSource::Colour(info) => (
+            info.texture(),
+            info.tex_coord(),
+            info.texture_transform(),
+            true,
+        ),
+        TexSource::Normal(n) => (n.texture(), n.tex_coord(), None, false),
+    };
     let el = format!("{element}.{field} (textures[{}])", tex.index());
     let bytes: Vec<u8> = match tex.source().source() {
         gltf::image::Source::View { view, .. } => {
@@ -333,7 +350,13 @@ fn read_texture(
         Vec::new()
     };
     let img = decoded.to_rgb8();
-    let decode = |v: u8| crate::spectral::color::srgb_decode(v as f32 / 255.0);
+    let decode = |v: u8| {
+        if srgb {
+            crate::spectral::color::srgb_decode(v as f32 / 255.0)
+        } else {
+            v as f32 / 255.0
+        }
+    };
     let texels = img.pixels().map(|p| p.0.map(decode)).collect();
     let sampler = tex.sampler();
     let wrap = |w: gltf::texture::WrappingMode| match w {
@@ -345,7 +368,7 @@ fn read_texture(
         sampler.mag_filter(),
         Some(gltf::texture::MagFilter::Nearest)
     );
-    let transform = match info.texture_transform() {
+    let transform = match texture_transform {
         Some(t) => {
             if t.tex_coord().is_some_and(|c| c != 0) {
                 warnings.push(format!(
@@ -356,10 +379,9 @@ fn read_texture(
         }
         None => glam::Mat3::IDENTITY,
     };
-    if info.tex_coord() != 0 {
+    if tex_coord != 0 {
         warnings.push(format!(
-            "{el}: texCoord {} ignored (TEXCOORD_0 used)",
-            info.tex_coord()
+            "{el}: texCoord {tex_coord} ignored (TEXCOORD_0 used)"
         ));
     }
     Ok(TextureRef {
@@ -822,9 +844,31 @@ fn read_material(
         "baseColorFactor",
     )?;
     let masked = m.alpha_mode() == gltf::material::AlphaMode::Mask;
+    let normal_texture = match m.normal_texture() {
+        Some(n) => {
+            let scale = n.scale();
+            if !scale.is_finite() {
+                return Err(ctx.err(
+                    format!("{element}.normalTexture.scale"),
+                    format!("value {scale} is not finite"),
+                ));
+            }
+            let t = read_texture(
+                TexSource::Normal(n),
+                "normalTexture",
+                buffers,
+                ctx,
+                &element,
+                warnings,
+                false,
+            )?;
+            Some((t, scale))
+        }
+        None => None,
+    };
     let base_color_texture = match pbr.base_color_texture() {
         Some(info) => Some(read_texture(
-            &info,
+            TexSource::Colour(info),
             "baseColorTexture",
             buffers,
             ctx,
@@ -839,7 +883,6 @@ fn read_material(
             "metallicRoughnessTexture",
             pbr.metallic_roughness_texture().is_some(),
         ),
-        ("normalTexture", m.normal_texture().is_some()),
         ("occlusionTexture", m.occlusion_texture().is_some()),
         (
             "KHR_materials_transmission.transmissionTexture",
@@ -950,7 +993,7 @@ fn read_material(
     // An emissive texture only matters where the factor emits (glTF multiplies them).
     let emissive_texture = match (m.emissive_texture(), &emission) {
         (Some(info), Some(_)) => Some(read_texture(
-            &info,
+            TexSource::Colour(info),
             "emissiveTexture",
             buffers,
             ctx,
@@ -970,6 +1013,7 @@ fn read_material(
         emissive_texture,
         vertex_colors: false,
         alpha_mask,
+        normal_texture,
     })
 }
 

@@ -72,6 +72,9 @@ pub struct Material {
     /// glTF alphaMode MASK: holes where factor × the base-colour texture's alpha is below
     /// the cutoff (rays pass through them).
     pub alpha_mask: Option<AlphaMask>,
+    /// glTF `normalTexture` (a tangent-space normal map, stored linear) and its scale:
+    /// it tilts the shading normal per hit (see [`crate::scene::SpectralScene::intersect`]).
+    pub normal_texture: Option<(texture::TextureRef, f32)>,
 }
 
 /// A cut-out material's alpha test (glTF alphaMode MASK).

@@ -57,6 +57,8 @@ pub struct SMaterial {
     pub base: Option<BaseColor>,
     /// An emissive texture: it filters `emission` per hit.
     pub emission_texture: Option<TextureRef>,
+    /// A tangent-space normal map and its scale (glTF `normalTexture`).
+    pub normal_map: Option<(TextureRef, f32)>,
 }
 
 impl SMaterial {
@@ -82,6 +84,10 @@ pub struct SpectralScene {
     pub triangle_uvs: Vec<[glam::Vec2; 3]>,
     /// Vertex colours (linear RGB) per triangle (empty: none).
     pub triangle_colors: Vec<[Vec3; 3]>,
+    /// Per triangle, ∂p/∂u and −∂p/∂v (glTF's v runs down the image, a normal map's +y
+    /// up it): the tangent frame of a normal map. Zero where no normal map applies or the
+    /// texture coordinates are degenerate; empty when no material has a normal map.
+    pub tangents: Vec<[Vec3; 2]>,
     pub materials: Vec<SMaterial>,
     pub lights: LightSet,
     /// Radiance of the uniform sky, seen by camera paths that escape (None: black).
@@ -141,6 +147,7 @@ impl SpectralScene {
                 }
             )
         });
+        let tangents = uv_tangents(scene, &materials);
         let mut accel = Accel::new(&scene.triangles);
         if let Some((holed, cutouts)) = AlphaCutouts::of(scene, &tris) {
             accel.set_cutouts(&holed, std::sync::Arc::new(cutouts));
@@ -157,6 +164,7 @@ impl SpectralScene {
             } else {
                 Vec::new()
             },
+            tangents,
             triangle_colors: if scene.triangle_colors.len() == scene.triangles.len() {
                 scene.triangle_colors.clone()
             } else {
@@ -198,7 +206,41 @@ impl SpectralScene {
             hit.t,
         );
         h.prim = hit.prim;
+        self.apply_normal_map(&mut h);
         Some(h)
+    }
+
+    /// Tilts `h.ns` by its material's normal map, if it has one: the texel's
+    /// tangent-space normal (2c − 1, x and y times the scale) in the frame of the
+    /// triangle's tangents about the interpolated normal. A tilt past the geometric
+    /// surface's horizon is not applied.
+    fn apply_normal_map(&self, h: &mut SurfaceHit) {
+        let Some((tex, scale)) = &self.materials[h.material as usize].normal_map else {
+            return;
+        };
+        let i = h.prim as usize;
+        let (Some(&[t, b]), Some(uv)) = (self.tangents.get(i), self.triangle_uvs.get(i)) else {
+            return;
+        };
+        if t == Vec3::ZERO {
+            return;
+        }
+        let (b1, b2) = h.bary;
+        let c = tex.sample(uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2);
+        let m = Vec3::new(
+            (2.0 * c[0] - 1.0) * scale,
+            (2.0 * c[1] - 1.0) * scale,
+            2.0 * c[2] - 1.0,
+        );
+        // The outward interpolated normal (ns faces the side the ray came from).
+        let n = if h.front { h.ns } else { -h.ns };
+        let t = (t - n * n.dot(t)).normalize_or_zero();
+        let b = (b - n * n.dot(b) - t * t.dot(b)).normalize_or_zero();
+        let tilted = (t * m.x + b * m.y + n * m.z).normalize_or_zero();
+        let tilted = if h.front { tilted } else { -tilted };
+        if tilted.is_finite() && tilted.dot(h.nf) > 0.0 {
+            h.ns = tilted;
+        }
     }
 
     /// The diffuse reflectance (N bins) at a hit: the material's own, or, for a textured
@@ -304,6 +346,40 @@ pub fn path_eta(
     } else {
         eta[bin]
     }
+}
+
+/// The normal-map tangent frames of `scene`'s triangles (see
+/// [`SpectralScene::tangents`]); empty when no material has a normal map or no mesh has
+/// texture coordinates.
+fn uv_tangents(scene: &Scene, materials: &[SMaterial]) -> Vec<[Vec3; 2]> {
+    if materials.iter().all(|m| m.normal_map.is_none())
+        || scene.triangle_uvs.len() != scene.triangles.len()
+    {
+        return Vec::new();
+    }
+    scene
+        .triangles
+        .iter()
+        .zip(&scene.triangle_uvs)
+        .zip(&scene.triangle_material)
+        .map(|((p, uv), &m)| {
+            if materials[m as usize].normal_map.is_none() {
+                return [Vec3::ZERO; 2];
+            }
+            let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+            let (d1, d2) = (uv[1] - uv[0], uv[2] - uv[0]);
+            let det = d1.x * d2.y - d2.x * d1.y;
+            if !(det.abs() > 1e-12) {
+                return [Vec3::ZERO; 2];
+            }
+            let dpdu = (e1 * d2.y - e2 * d1.y) / det;
+            let dpdv = (e2 * d1.x - e1 * d2.x) / det;
+            if !(dpdu.is_finite() && dpdv.is_finite()) {
+                return [Vec3::ZERO; 2];
+            }
+            [dpdu, -dpdv]
+        })
+        .collect()
 }
 
 /// The holes of cut-out materials (glTF alphaMode MASK), as the BVH asks for them.
@@ -472,6 +548,7 @@ fn project_material(m: &Material, grid: &BinGrid) -> SMaterial {
         emission: m.emission.as_ref().map(|e| grid.project(e, Role::Emission)),
         base: base_color(m),
         emission_texture: m.emissive_texture.clone(),
+        normal_map: m.normal_texture.clone(),
         absorption: m.volume.as_ref().map(|v| {
             grid.project(&Spectrum::reflectance(v.color), Role::Reflectance)
                 .into_iter()
