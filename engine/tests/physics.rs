@@ -1374,17 +1374,24 @@ fn a_smooth_shaded_diffuse_ball_looks_like_a_finely_tessellated_one() {
 fn a_cut_out_canopy_passes_sunlight_where_it_has_holes() {
     // glTF alphaMode MASK: a canopy over a sunlit floor. Alpha 0.2 everywhere (below the
     // 0.5 cutoff): all hole, the floor gets the whole Sun, ρE/π, by shadow rays (fg 4)
-    // and by photons (fg 0). Alpha 0.8: a roof, the floor is dark.
+    // and by photons (fg 0). Alpha 0.8: a roof, the floor is dark. BLEND at alpha 0.3: a
+    // veil that passes 70 %.
     use prismap_engine::scene::{AlphaMask, PunctualKind, PunctualLight};
     let (rho, e) = (0.5, 3.0);
-    for (alpha, exact) in [(0.2f32, rho * e / std::f64::consts::PI), (0.8, 0.0)] {
+    let full = rho * e / std::f64::consts::PI;
+    for (alpha, blend, exact) in [
+        (0.2f32, false, full),
+        (0.8, false, 0.0),
+        (0.3, true, 0.7 * full),
+    ] {
         let mut b = Builder::new();
         b.add(floor_4x4(), diffuse(rho), None);
         let canopy = floor_4x4()
             .into_iter()
             .map(|t| t.map(|v| 1.5 * v + Vec3::Y))
             .collect();
-        b.add(canopy, diffuse(0.5), None);
+        // Black: it only stops light (no light bounces between it and the floor).
+        b.add(canopy, diffuse(0.0), None);
         let mut scene = b.scene(
             "canopy",
             Camera::look_at(Vec3::new(0.0, 0.5, 0.0), Vec3::ZERO, Vec3::Z, 0.8),
@@ -1392,6 +1399,7 @@ fn a_cut_out_canopy_passes_sunlight_where_it_has_holes() {
         scene.materials[1].alpha_mask = Some(AlphaMask {
             cutoff: 0.5,
             factor: alpha,
+            blend,
         });
         scene.lights.push(PunctualLight {
             name: "Sun".into(),
@@ -1403,7 +1411,7 @@ fn a_cut_out_canopy_passes_sunlight_where_it_has_holes() {
         });
         for fg in [0, 4] {
             let mean = mean_luminance(&scene, settings(Storage::Compact, 8, fg, 16, 40_000), 4);
-            println!("alpha {alpha} fg {fg}: floor {mean:.4} (exact {exact:.4})");
+            println!("alpha {alpha} blend {blend} fg {fg}: floor {mean:.4} (exact {exact:.4})");
             assert!(
                 (mean - exact).abs() < 0.03 * rho * e / std::f64::consts::PI,
                 "alpha {alpha} fg {fg}: {mean} against {exact}"

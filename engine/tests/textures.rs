@@ -531,43 +531,41 @@ fn blenders_painted_colour_attributes_load_as_vertex_colours() {
 }
 
 #[test]
-fn blended_alpha_is_rendered_opaque_with_a_warning_and_masks_load_as_cut_outs() {
-    // Blender writes alphaMode BLEND for decals and "glass" made with Alpha: prismap
-    // renders the surface opaque and says so. MASK (leaves, fences) is a cut-out.
+fn masks_load_as_cut_outs_and_blends_as_partial_cover() {
+    // Blender writes alphaMode MASK for clipped alpha (leaves, fences) and BLEND for
+    // Alpha below 1 (veils, decals): both load as a coverage test, without warnings.
     let white = [[255u8; 4]; 6].concat();
     let load = |extra: &str| {
         let text = vertex_coloured_quad_gltf((&white, 5121, true, "VEC4"), [1.0; 3], extra);
         scene::load_from_slice(text.as_bytes(), "leaf.gltf", None).unwrap()
     };
-    let s = load(r#","alphaMode":"BLEND""#);
-    assert!(
-        s.warnings.iter().any(|w| w.contains("'painted'")
-            && w.contains("alphaMode BLEND ignored")
-            && w.contains("opaque")),
-        "{:?}",
-        s.warnings
-    );
-    assert!(s.materials[0].alpha_mask.is_none());
-    let s = load(r#","alphaMode":"MASK","alphaCutoff":0.3"#);
-    assert!(
-        s.warnings.iter().all(|w| !w.contains("alphaMode")),
-        "{:?}",
-        s.warnings
-    );
-    assert_eq!(
-        s.materials[0].alpha_mask,
-        Some(scene::AlphaMask {
-            cutoff: 0.3,
-            factor: 1.0
-        })
-    );
-    let s = load("");
-    assert!(
-        s.warnings.iter().all(|w| !w.contains("alphaMode")),
-        "{:?}",
-        s.warnings
-    );
-    assert!(s.materials[0].alpha_mask.is_none());
+    for (extra, want) in [
+        (
+            r#","alphaMode":"MASK","alphaCutoff":0.3"#,
+            Some(scene::AlphaMask {
+                cutoff: 0.3,
+                factor: 1.0,
+                blend: false,
+            }),
+        ),
+        (
+            r#","alphaMode":"BLEND""#,
+            Some(scene::AlphaMask {
+                cutoff: 0.5,
+                factor: 1.0,
+                blend: true,
+            }),
+        ),
+        ("", None),
+    ] {
+        let s = load(extra);
+        assert!(
+            s.warnings.iter().all(|w| !w.contains("alpha")),
+            "{:?}",
+            s.warnings
+        );
+        assert_eq!(s.materials[0].alpha_mask, want, "{extra}");
+    }
 }
 
 /// [`textured_quad_gltf`]'s quad with an RGBA texture: black texels of alpha `alpha`
@@ -653,7 +651,8 @@ fn blenders_alpha_clipped_leaf_loads_as_a_cut_out_with_its_holes() {
         leaf.alpha_mask,
         Some(scene::AlphaMask {
             cutoff: 0.5,
-            factor: 1.0
+            factor: 1.0,
+            blend: false,
         })
     );
     let tex = &leaf.base_color_texture.as_ref().unwrap().texture;
@@ -733,6 +732,49 @@ fn blenders_normal_map_loads_with_tangents_from_its_texture_coordinates() {
         assert!(
             t.normalize().dot(b.normalize()).abs() < 1e-5,
             "triangle {i}"
+        );
+    }
+}
+
+#[test]
+fn a_blended_veil_lets_one_minus_alpha_of_the_sky_through() {
+    // alphaMode BLEND: a black quad whose texture's alpha is 0.2, 0.4 / 0.6, 0.8 before the
+    // default sky (radiance 1) covers that fraction of each point, so each quarter shows
+    // 1 − alpha of the sky (stochastic transparency: within noise, 0.03).
+    let alpha = [51u8, 102, 153, 204];
+    let text = masked_quad_gltf(alpha).replace(r#""alphaMode":"MASK""#, r#""alphaMode":"BLEND""#);
+    let s = scene::load_from_slice(text.as_bytes(), "veil.gltf", None).unwrap();
+    assert!(s.materials[0].alpha_mask.is_some_and(|m| m.blend));
+    let settings = RenderSettings {
+        bins: 8,
+        storage: Storage::Compact,
+        width: 32,
+        height: 32,
+        photons_per_pass: 5_000,
+        final_gather_rays: 4,
+        ..RenderSettings::default()
+    };
+    let mut r = RenderSession::new(&s, settings).unwrap();
+    for _ in 0..8 {
+        r.run_pass().unwrap();
+    }
+    let img = r.image();
+    let lum = |p: [f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+    for (i, a) in alpha.iter().enumerate() {
+        // The mean over the quarter's inner 12 × 12 pixels.
+        let (x0, y0) = (2 + 16 * (i as u32 % 2), 2 + 16 * (i as u32 / 2));
+        let mut sum = 0.0;
+        for y in y0..y0 + 12 {
+            for x in x0..x0 + 12 {
+                sum += lum(img.get(x, y));
+            }
+        }
+        let mean = sum / 144.0;
+        let want = 1.0 - *a as f32 / 255.0;
+        println!("quarter {i}: {mean:.4} (1 − alpha = {want:.4})");
+        assert!(
+            (mean - want).abs() < 0.03,
+            "quarter {i}: {mean} against {want}"
         );
     }
 }

@@ -154,12 +154,13 @@ pub struct Accel {
     ids: Vec<u32>,
     /// Scene bounds' diagonal length, for ray offsets.
     diagonal: f32,
-    /// Triangles with holes (glTF alphaMode MASK), if any: see [`Cutouts`].
+    /// Triangles with holes (glTF alphaMode MASK or BLEND), if any: see [`Cutouts`].
     cutouts: Option<(Vec<bool>, std::sync::Arc<dyn Cutouts>)>,
 }
 
 /// Where triangles have holes: a ray passes through triangle `prim` (scene order) at the
-/// point `p` on it when `passes` says so (glTF's alpha cut-outs, for leaves and fences).
+/// point `p` on it when `passes` says so (glTF's alpha cut-outs, for leaves and fences,
+/// and blending, which `passes` decides at random, as a pure function of `prim` and `p`).
 /// Both closest-hit and shadow rays ask it, during traversal.
 pub trait Cutouts: Send + Sync {
     fn passes(&self, prim: u32, p: Vec3) -> bool;

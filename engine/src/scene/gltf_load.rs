@@ -844,6 +844,7 @@ fn read_material(
         "baseColorFactor",
     )?;
     let masked = m.alpha_mode() == gltf::material::AlphaMode::Mask;
+    let blended = m.alpha_mode() == gltf::material::AlphaMode::Blend;
     let normal_texture = match m.normal_texture() {
         Some(n) => {
             let scale = n.scale();
@@ -874,7 +875,7 @@ fn read_material(
             ctx,
             &element,
             warnings,
-            masked,
+            masked || blended,
         )?),
         None => None,
     };
@@ -897,9 +898,9 @@ fn read_material(
         }
     }
     // Cut-outs (MASK: leaves, fences) have holes where alpha = factor × texel alpha is
-    // below the cutoff. See-through blending (BLEND; Blender: Alpha below 1 or an image's
-    // alpha into it) is not rendered: the surface is opaque.
-    let alpha_mask = if masked {
+    // below the cutoff; see-through blending (BLEND; Blender: Alpha below 1 or an image's
+    // alpha into it) lets a fraction 1 − alpha through.
+    let alpha_mask = if masked || blended {
         let cutoff = m.alpha_cutoff().unwrap_or(0.5);
         if !cutoff.is_finite() {
             return Err(ctx.err(
@@ -914,15 +915,14 @@ fn read_material(
                 format!("value {factor} is not finite"),
             ));
         }
-        Some(super::AlphaMask { cutoff, factor })
+        Some(super::AlphaMask {
+            cutoff,
+            factor,
+            blend: blended,
+        })
     } else {
         None
     };
-    if m.alpha_mode() == gltf::material::AlphaMode::Blend {
-        warnings.push(format!(
-            "{element} '{name}': alphaMode BLEND ignored: rendered opaque (for glass, use Transmission instead of Alpha; for cut-outs, alphaMode MASK)"
-        ));
-    }
     let transmission = m
         .transmission()
         .map(|t| t.transmission_factor())

@@ -69,21 +69,26 @@ pub struct Material {
     /// colour is multiplied per hit by the colour interpolated between the triangle's
     /// corners (glTF: factor × texture × `COLOR_0`; see [`Scene::triangle_colors`]).
     pub vertex_colors: bool,
-    /// glTF alphaMode MASK: holes where factor × the base-colour texture's alpha is below
-    /// the cutoff (rays pass through them).
+    /// glTF alphaMode MASK or BLEND: holes where factor × the base-colour texture's alpha
+    /// is below the cutoff, or partial cover by that alpha (see [`AlphaMask`]).
     pub alpha_mask: Option<AlphaMask>,
     /// glTF `normalTexture` (a tangent-space normal map, stored linear) and its scale:
     /// it tilts the shading normal per hit (see [`crate::scene::SpectralScene::intersect`]).
     pub normal_texture: Option<(texture::TextureRef, f32)>,
 }
 
-/// A cut-out material's alpha test (glTF alphaMode MASK).
+/// A material's coverage by alpha = factor × the base-colour texture's alpha: a cut-out
+/// (glTF alphaMode MASK) or see-through blending (BLEND).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AlphaMask {
-    /// glTF alphaCutoff (default 0.5): alpha below it is a hole.
+    /// glTF alphaCutoff (default 0.5): alpha below it is a hole (MASK only).
     pub cutoff: f32,
     /// The base colour factor's alpha.
     pub factor: f32,
+    /// BLEND: the surface covers a fraction alpha of each point, so a ray passes it with
+    /// probability 1 − alpha (stochastic transparency: light through it is scaled by
+    /// 1 − alpha on average, unbent and uncoloured, as glTF's blending means).
+    pub blend: bool,
 }
 
 /// Beer–Lambert absorption inside a closed glass: after `distance` scene units inside,

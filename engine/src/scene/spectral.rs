@@ -382,7 +382,8 @@ fn uv_tangents(scene: &Scene, materials: &[SMaterial]) -> Vec<[Vec3; 2]> {
         .collect()
 }
 
-/// The holes of cut-out materials (glTF alphaMode MASK), as the BVH asks for them.
+/// The holes of cut-out and blended materials (glTF alphaMode MASK, BLEND), as the BVH
+/// asks for them.
 struct AlphaCutouts {
     /// Per scene triangle: its index in `tris`, or `u32::MAX` if it has no holes.
     slot: Vec<u32>,
@@ -403,8 +404,9 @@ impl AlphaCutouts {
                 .base_color_texture
                 .clone()
                 .filter(|t| !t.texture.alpha.is_empty());
-            // A factor at or above the cutoff with no alpha texture: no hole anywhere.
-            if tex.is_none() && mask.factor >= mask.cutoff {
+            // No alpha texture and a factor that covers everything: no hole anywhere.
+            let covered = if mask.blend { 1.0 } else { mask.cutoff };
+            if tex.is_none() && mask.factor >= covered {
                 continue;
             }
             mask_of[i] = masks.len() as u32;
@@ -456,9 +458,28 @@ impl crate::geometry::Cutouts for AlphaCutouts {
             let (b1, b2) = tri.barycentric(p);
             alpha *= tex.sample_alpha(uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2);
         }
+        if mask.blend {
+            // Passes with probability 1 − alpha, decided by a hash of where the ray meets
+            // the surface: the same for any thread count, fresh for every ray.
+            return !(coverage_u(prim, p) < alpha);
+        }
         // A NaN alpha (never from a checked file) is a hole, not a wall.
         !(alpha >= mask.cutoff)
     }
+}
+
+/// A number uniform in [0, 1) from a triangle and a point on it (a hash of their bits).
+fn coverage_u(prim: u32, p: Vec3) -> f32 {
+    let mut h = u64::from(prim) ^ 0x9e37_79b9_7f4a_7c15;
+    for c in [p.x, p.y, p.z] {
+        h ^= u64::from(c.to_bits());
+        // splitmix64's finaliser.
+        h = h.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        h = (h ^ (h >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        h = (h ^ (h >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        h ^= h >> 31;
+    }
+    (h >> 40) as f32 / (1u64 << 24) as f32
 }
 
 /// The GGX α of a glTF perceptual roughness (its square); 0 (smooth) below
