@@ -691,6 +691,18 @@ fn a_normal_texture_loads_linear_with_its_scale() {
         let want = c.map(|v| prismap_engine::spectral::color::srgb8(v) as f32 / 255.0);
         assert_eq!(*got, want);
     }
+    // KHR_texture_transform on a normal texture (Blender: a Mapping node) moves it too.
+    let moved = text.replace(
+        r#""scale":0.7}"#,
+        r#""scale":0.7,"extensions":{"KHR_texture_transform":{"offset":[0.5,0],"rotation":0.25,"scale":[2,3]}}}"#,
+    );
+    assert_ne!(moved, text);
+    let s = scene::load_from_slice(moved.as_bytes(), "bumpy.gltf", None).unwrap();
+    let (tex, _) = s.materials[0].normal_texture.as_ref().unwrap();
+    assert_eq!(
+        tex.transform,
+        prismap_engine::scene::texture::uv_transform([0.5, 0.0], 0.25, [2.0, 3.0])
+    );
     // JSON has no NaN; an overflowing number is its nearest way to write a non-finite one.
     let bad = text.replace(r#""scale":0.7"#, r#""scale":1e999"#);
     let e = scene::load_from_slice(bad.as_bytes(), "bumpy.gltf", None)

@@ -296,6 +296,22 @@ fn read_texture(
         ),
         TexSource::Normal(n) => (n.texture(), n.tex_coord(), None, false),
     };
+    // The gltf crate reads KHR_texture_transform only on colour textures: a normal
+    // texture's is read from its JSON.
+    let normal_transform = match &source {
+        TexSource::Normal(n) => n.extension_value("KHR_texture_transform").map(|v| {
+            let pair = |key: &str, default: [f32; 2]| -> [f32; 2] {
+                v.get(key)
+                    .and_then(|a| a.as_array())
+                    .filter(|a| a.len() == 2)
+                    .and_then(|a| Some([a[0].as_f64()? as f32, a[1].as_f64()? as f32]))
+                    .unwrap_or(default)
+            };
+            let rotation = v.get("rotation").and_then(|r| r.as_f64()).unwrap_or(0.0) as f32;
+            (pair("offset", [0.0; 2]), rotation, pair("scale", [1.0; 2]))
+        }),
+        TexSource::Colour(_) => None,
+    };
     let el = format!("{element}.{field} (textures[{}])", tex.index());
     let bytes: Vec<u8> = match tex.source().source() {
         gltf::image::Source::View { view, .. } => {
@@ -377,7 +393,10 @@ fn read_texture(
             }
             uv_transform(t.offset(), t.rotation(), t.scale())
         }
-        None => glam::Mat3::IDENTITY,
+        None => match normal_transform {
+            Some((offset, rotation, scale)) => uv_transform(offset, rotation, scale),
+            None => glam::Mat3::IDENTITY,
+        },
     };
     if tex_coord != 0 {
         warnings.push(format!(
