@@ -234,17 +234,17 @@ fn bright_furnaces_lose_no_energy_to_a_bounce_cap() {
     }
 }
 
-#[test]
-fn emitter_inside_glass_seen_from_outside_is_t_over_n_squared() {
-    // Issue #8.1: a radiance-1 emitter inside a glass block (n = 1.5), seen from air at
-    // normal incidence, has radiance T(0)·L/n² = 0.96/2.25 = 0.4267 (Mitsuba 3: 0.428).
-    // prismap showed 2.17 (a factor n⁴ too bright) before the fix.
-    let n = 1.5f64;
-    let t0 = 1.0 - ((n - 1.0) / (n + 1.0)).powi(2);
-    let exact = t0 / (n * n);
+/// A radiance-1 emitter (3 × 3, at z = 4, facing the camera) and a glass block of index
+/// `n` from z = 2 to `back_z` (past 4 the emitter is inside it), seen by a narrow camera
+/// at the origin looking along +z through the block's front face.
+fn emitter_seen_through_glass(n: f64, back_z: f32) -> Scene {
     let mut b = Builder::new();
     b.add(
-        box_triangles(Vec3::new(-2.0, -2.0, 2.0), Vec3::new(2.0, 2.0, 6.0), false),
+        box_triangles(
+            Vec3::new(-2.0, -2.0, 2.0),
+            Vec3::new(2.0, 2.0, back_z),
+            false,
+        ),
         glass(n),
         None,
     );
@@ -253,9 +253,22 @@ fn emitter_inside_glass_seen_from_outside_is_t_over_n_squared() {
         diffuse(0.0),
         Some(Spectrum::Constant(1.0)),
     );
+    b.scene(
+        "emitter-behind-glass",
+        Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 0.2),
+    )
+}
+
+#[test]
+fn emitter_inside_glass_seen_from_outside_is_t_over_n_squared() {
+    // Issue #8.1: a radiance-1 emitter inside a glass block (n = 1.5), seen from air at
+    // normal incidence, has radiance T(0)·L/n² = 0.96/2.25 = 0.4267 (Mitsuba 3: 0.428).
+    // prismap showed 2.17 (a factor n⁴ too bright) before the fix.
+    let n = 1.5f64;
+    let t0 = 1.0 - ((n - 1.0) / (n + 1.0)).powi(2);
+    let exact = t0 / (n * n);
     // A narrow view straight along +z: every pixel sees the emitter through the front face.
-    let camera = Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 0.2);
-    let scene = b.scene("immersed-emitter", camera);
+    let scene = emitter_seen_through_glass(n, 6.0);
     for (storage, bins) in STORAGES {
         for fg in [0, 8] {
             let mean = mean_luminance(&scene, settings(storage, bins, fg, 32, 5_000), 8);
@@ -1146,19 +1159,7 @@ fn an_emitter_seen_through_a_glass_pane_keeps_the_slabs_transmittance() {
     for n in [1.5f64, 2.4] {
         let r = ((n - 1.0) / (n + 1.0)).powi(2);
         let exact = (1.0 - r) / (1.0 + r);
-        let mut b = Builder::new();
-        b.add(
-            box_triangles(Vec3::new(-2.0, -2.0, 2.0), Vec3::new(2.0, 2.0, 2.3), false),
-            glass(n),
-            None,
-        );
-        b.add(
-            square_facing_minus_z(Vec3::new(0.0, 0.0, 4.0), 3.0),
-            diffuse(0.0),
-            Some(Spectrum::Constant(1.0)),
-        );
-        let camera = Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 0.2);
-        let scene = b.scene("emitter-behind-a-pane", camera);
+        let scene = emitter_seen_through_glass(n, 2.3);
         for (storage, bins) in [(Storage::Compact, 8), (Storage::Full, 4), (Storage::Rgb, 3)] {
             for fg in [0, 4] {
                 let mean = mean_luminance(&scene, settings(storage, bins, fg, 16, 5_000), 32);

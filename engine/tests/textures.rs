@@ -65,6 +65,51 @@ fn textured_quad_gltf(extra_texture_info: &str) -> String {
     )
 }
 
+/// `s` rendered at 32 × 32 on `bins` bins of `storage`, 5 000 photons and `fg`
+/// final-gather rays a pass, after `passes` passes; with its bin grid.
+fn render_32(
+    s: &scene::Scene,
+    storage: Storage,
+    bins: usize,
+    fg: u32,
+    passes: usize,
+) -> (
+    prismap_engine::render::Image,
+    prismap_engine::spectral::BinGrid,
+) {
+    let settings = RenderSettings {
+        bins,
+        storage,
+        width: 32,
+        height: 32,
+        photons_per_pass: 5_000,
+        final_gather_rays: fg,
+        ..RenderSettings::default()
+    };
+    let mut r = RenderSession::new(s, settings).unwrap();
+    for _ in 0..passes {
+        r.run_pass().unwrap();
+    }
+    (r.image(), r.scene().grid.clone())
+}
+
+/// The colour a diffuse surface of linear RGB reflectance `rgb` shows under the default
+/// white (D65) sky: `rgb` itself on the RGB grid, its upsampled spectrum's round trip on
+/// a spectral one.
+fn under_the_sky(grid: &prismap_engine::spectral::BinGrid, rgb: [f32; 3]) -> [f32; 3] {
+    use prismap_engine::spectral::{Role, Spectrum, Transport};
+    if grid.transport() == Transport::Rgb {
+        return rgb;
+    }
+    let mut v = grid.project(
+        &Spectrum::reflectance(rgb.map(f64::from)),
+        Role::Reflectance,
+    );
+    let sky = grid.project(&Spectrum::illuminant([1.0; 3]), Role::Emission);
+    prismap_engine::spectral::spd::mul_assign(&mut v, &sky);
+    grid.to_linear_srgb(&v)
+}
+
 #[test]
 fn a_textured_quad_seen_head_on_shows_its_texture() {
     // Under the default white (D65) sky a flat diffuse surface facing it has radiance ρ, so
@@ -83,34 +128,8 @@ fn a_textured_quad_seen_head_on_shows_its_texture() {
         (Storage::Full, 16),
         (Storage::Rgb, 3),
     ] {
-        let settings = RenderSettings {
-            bins,
-            storage,
-            width: 32,
-            height: 32,
-            photons_per_pass: 5_000,
-            final_gather_rays: 16,
-            ..RenderSettings::default()
-        };
-        let mut r = RenderSession::new(&s, settings).unwrap();
-        for _ in 0..4 {
-            r.run_pass().unwrap();
-        }
-        let img = r.image();
-        let grid = r.scene().grid.clone();
-        let round_trip = |rgb: [f32; 3]| -> [f32; 3] {
-            use prismap_engine::spectral::{Role, Spectrum};
-            if storage == Storage::Rgb {
-                return rgb;
-            }
-            let mut v = grid.project(
-                &Spectrum::reflectance(rgb.map(f64::from)),
-                Role::Reflectance,
-            );
-            let sky = grid.project(&Spectrum::illuminant([1.0; 3]), Role::Emission);
-            prismap_engine::spectral::spd::mul_assign(&mut v, &sky);
-            grid.to_linear_srgb(&v)
-        };
+        let (img, grid) = render_32(&s, storage, bins, 16, 4);
+        let round_trip = |rgb: [f32; 3]| under_the_sky(&grid, rgb);
         for (i, texel) in TEXELS.iter().enumerate() {
             let want = &round_trip(*texel);
             // The middle of each quarter of the view.
@@ -380,34 +399,8 @@ fn vertex_colours_multiply_the_base_colour_as_blender_exports_them() {
         s.warnings
     );
     for (storage, bins) in [(Storage::Compact, 16), (Storage::Rgb, 3)] {
-        let settings = RenderSettings {
-            bins,
-            storage,
-            width: 32,
-            height: 32,
-            photons_per_pass: 5_000,
-            final_gather_rays: 16,
-            ..RenderSettings::default()
-        };
-        let mut r = RenderSession::new(&s, settings).unwrap();
-        for _ in 0..4 {
-            r.run_pass().unwrap();
-        }
-        let img = r.image();
-        let grid = r.scene().grid.clone();
-        let round_trip = |rgb: [f32; 3]| -> [f32; 3] {
-            use prismap_engine::spectral::{Role, Spectrum};
-            if storage == Storage::Rgb {
-                return rgb;
-            }
-            let mut v = grid.project(
-                &Spectrum::reflectance(rgb.map(f64::from)),
-                Role::Reflectance,
-            );
-            let sky = grid.project(&Spectrum::illuminant([1.0; 3]), Role::Emission);
-            prismap_engine::spectral::spd::mul_assign(&mut v, &sky);
-            grid.to_linear_srgb(&v)
-        };
+        let (img, grid) = render_32(&s, storage, bins, 16, 4);
+        let round_trip = |rgb: [f32; 3]| under_the_sky(&grid, rgb);
         for (name, colour, (x, y)) in [("lower left", a, (6, 26)), ("upper right", b, (26, 6))] {
             let want = round_trip([0, 1, 2].map(|c| colour[c] * factor[c]));
             let got = img.get(x, y);
@@ -606,20 +599,7 @@ fn alpha_mask_cut_outs_let_rays_and_light_through_their_holes() {
         "{:?}",
         s.warnings
     );
-    let settings = RenderSettings {
-        bins: 8,
-        storage: Storage::Compact,
-        width: 32,
-        height: 32,
-        photons_per_pass: 5_000,
-        final_gather_rays: 4,
-        ..RenderSettings::default()
-    };
-    let mut r = RenderSession::new(&s, settings).unwrap();
-    for _ in 0..2 {
-        r.run_pass().unwrap();
-    }
-    let img = r.image();
+    let (img, _) = render_32(&s, Storage::Compact, 8, 4, 2);
     let lum = |p: [f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
     for (i, hole) in [false, true, true, false].into_iter().enumerate() {
         let (x, y) = (8 + 16 * (i as u32 % 2), 8 + 16 * (i as u32 / 2));
@@ -757,20 +737,7 @@ fn a_blended_veil_lets_one_minus_alpha_of_the_sky_through() {
     let text = masked_quad_gltf(alpha).replace(r#""alphaMode":"MASK""#, r#""alphaMode":"BLEND""#);
     let s = scene::load_from_slice(text.as_bytes(), "veil.gltf", None).unwrap();
     assert!(s.materials[0].alpha_mask.is_some_and(|m| m.blend));
-    let settings = RenderSettings {
-        bins: 8,
-        storage: Storage::Compact,
-        width: 32,
-        height: 32,
-        photons_per_pass: 5_000,
-        final_gather_rays: 4,
-        ..RenderSettings::default()
-    };
-    let mut r = RenderSession::new(&s, settings).unwrap();
-    for _ in 0..8 {
-        r.run_pass().unwrap();
-    }
-    let img = r.image();
+    let (img, _) = render_32(&s, Storage::Compact, 8, 4, 8);
     let lum = |p: [f32; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
     for (i, a) in alpha.iter().enumerate() {
         // The mean over the quarter's inner 12 × 12 pixels.

@@ -57,6 +57,15 @@ def export(name, lights=True, tangents=False):
     print("wrote", name)
 
 
+def add_sun(energy, rotation):
+    """A Sun of `energy` W/m² (exported as lux) turned by the Euler angles `rotation`."""
+    sun = bpy.data.lights.new("Sun", type="SUN")
+    sun.energy = energy
+    obj = bpy.data.objects.new("Sun", sun)
+    obj.rotation_euler = rotation
+    bpy.context.collection.objects.link(obj)
+
+
 def material(name, rgb, roughness=0.8):
     m = bpy.data.materials.new(name)
     m.use_nodes = True
@@ -77,11 +86,7 @@ def sun_scene():
     bpy.data.objects.remove(bpy.data.objects["Light"])
     bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, -1))
     bpy.context.object.data.materials.append(material("ground", (0.5, 0.5, 0.5)))
-    sun = bpy.data.lights.new("Sun", type="SUN")
-    sun.energy = 3.0  # W/m²: exported as lux
-    obj = bpy.data.objects.new("Sun", sun)
-    obj.rotation_euler = (math.radians(40), math.radians(20), math.radians(30))
-    bpy.context.collection.objects.link(obj)
+    add_sun(3.0, (math.radians(40), math.radians(20), math.radians(30)))
     export("sun.glb")
 
 
@@ -163,11 +168,7 @@ def textured_glass():
     bpy.context.object.data.materials.append(glass)
     bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, -1))
     bpy.context.object.data.materials.append(material("ground", (0.6, 0.6, 0.6)))
-    sun = bpy.data.lights.new("Sun", type="SUN")
-    sun.energy = 3.0
-    obj = bpy.data.objects.new("Sun", sun)
-    obj.rotation_euler = (math.radians(30), math.radians(15), 0)
-    bpy.context.collection.objects.link(obj)
+    add_sun(3.0, (math.radians(30), math.radians(15), 0))
     export("textured-glass.glb")
 
 
@@ -224,11 +225,7 @@ def rough_materials():
     silver.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
     bpy.context.object.data.materials.append(silver)
 
-    sun = bpy.data.lights.new("Sun", type="SUN")
-    sun.energy = 2.0
-    obj = bpy.data.objects.new("Sun", sun)
-    obj.rotation_euler = (math.radians(35), math.radians(-20), math.radians(20))
-    bpy.context.collection.objects.link(obj)
+    add_sun(2.0, (math.radians(35), math.radians(-20), math.radians(20)))
     cam = bpy.data.objects["Camera"]
     cam.location = (0.0, -5.5, 2.4)
     cam.rotation_euler = direction_to_euler((0.0, 5.5, -1.9))
@@ -269,11 +266,7 @@ def vertex_painted():
     sphere.data.materials.append(painted_material("gradient paint", "Gradient"))
     bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, -1))
     bpy.context.object.data.materials.append(material("ground", (0.5, 0.5, 0.5)))
-    sun = bpy.data.lights.new("Sun", type="SUN")
-    sun.energy = 3.0
-    obj = bpy.data.objects.new("Sun", sun)
-    obj.rotation_euler = (math.radians(30), math.radians(15), 0)
-    bpy.context.collection.objects.link(obj)
+    add_sun(3.0, (math.radians(30), math.radians(15), 0))
     export("vertex-painted.glb")
 
 
@@ -307,11 +300,7 @@ def cut_out_leaves():
     bpy.context.object.data.materials.append(m)
     bpy.ops.mesh.primitive_plane_add(size=20, location=(0, 0, 0))
     bpy.context.object.data.materials.append(material("ground", (0.6, 0.6, 0.6)))
-    sun = bpy.data.lights.new("Sun", type="SUN")
-    sun.energy = 3.0
-    obj = bpy.data.objects.new("Sun", sun)
-    obj.rotation_euler = (math.radians(10), 0, 0)
-    bpy.context.collection.objects.link(obj)
+    add_sun(3.0, (math.radians(10), 0, 0))
     cam = bpy.data.objects["Camera"]
     cam.location = (0.0, -4.0, 3.5)
     cam.rotation_euler = direction_to_euler((0.0, 4.0, -3.2))
@@ -344,11 +333,7 @@ def normal_mapped():
     links.new(nmap.outputs["Normal"], nodes["Principled BSDF"].inputs["Normal"])
     bpy.ops.mesh.primitive_plane_add(size=4, location=(0, 0, 0))
     bpy.context.object.data.materials.append(m)
-    sun = bpy.data.lights.new("Sun", type="SUN")
-    sun.energy = 3.0
-    obj = bpy.data.objects.new("Sun", sun)
-    obj.rotation_euler = (0, math.radians(60), 0)
-    bpy.context.collection.objects.link(obj)
+    add_sun(3.0, (0, math.radians(60), 0))
     cam = bpy.data.objects["Camera"]
     cam.location = (0.0, -4.0, 4.0)
     cam.rotation_euler = direction_to_euler((0.0, 4.0, -4.0))
