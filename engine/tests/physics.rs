@@ -111,6 +111,18 @@ impl Builder {
     }
 }
 
+/// glTF's directional light (Blender's Sun) travelling along `direction`, of
+/// illuminance `e` lux (flat spectrum) at normal incidence.
+fn sun(direction: Vec3, e: f64) -> prismap_engine::scene::PunctualLight {
+    use prismap_engine::scene::{PunctualKind, PunctualLight};
+    PunctualLight {
+        name: "Sun".into(),
+        position: Vec3::ZERO,
+        kind: PunctualKind::Directional { direction },
+        intensity: Spectrum::Constant(e),
+    }
+}
+
 fn diffuse(rho: f64) -> MaterialKind {
     MaterialKind::Diffuse {
         reflectance: Spectrum::Constant(rho),
@@ -428,7 +440,6 @@ fn a_sun_lights_a_floor_with_rho_e_over_pi() {
     // A directional light (glTF: lux; Blender's Sun) of irradiance E at normal incidence
     // on a diffuse floor: radiance ρE/π, from direct light (fg > 0) and from the photons
     // alone (fg 0).
-    use prismap_engine::scene::{PunctualKind, PunctualLight};
     let (rho, e) = (0.5, 3.0);
     let mut b = Builder::new();
     b.add(floor_4x4(), diffuse(rho), None);
@@ -436,14 +447,7 @@ fn a_sun_lights_a_floor_with_rho_e_over_pi() {
         "sun-floor",
         Camera::look_at(Vec3::new(0.0, 1.0, 0.01), Vec3::ZERO, Vec3::Y, 0.5),
     );
-    scene.lights.push(PunctualLight {
-        name: "Sun".into(),
-        position: Vec3::ZERO,
-        kind: PunctualKind::Directional {
-            direction: -Vec3::Y,
-        },
-        intensity: Spectrum::Constant(e),
-    });
+    scene.lights.push(sun(-Vec3::Y, e));
     let exact = rho * e / std::f64::consts::PI;
     for (storage, bins) in [(Storage::Compact, 8), (Storage::Rgb, 3)] {
         for fg in [0, 8] {
@@ -494,7 +498,7 @@ fn a_smooth_shaded_glass_ball_focuses_like_a_finely_tessellated_one() {
     // match a 128×64 flat-faceted ball's when the ball is a coarse 32×16 mesh with smooth
     // normals — and must not when the coarse mesh is shaded flat.
     use prismap_engine::photon::{PhotonSettings, Record, trace_photons};
-    use prismap_engine::scene::{PunctualKind, PunctualLight, SpectralScene};
+    use prismap_engine::scene::SpectralScene;
     use prismap_engine::spectral::BinGrid;
     let ball = |rings: usize, segments: usize, smooth: bool| {
         let mut b = Builder::new();
@@ -513,14 +517,7 @@ fn a_smooth_shaded_glass_ball_focuses_like_a_finely_tessellated_one() {
             assert_eq!(shading.len(), 2 + count);
             s.shading_normals = shading;
         }
-        s.lights.push(PunctualLight {
-            name: "sun".into(),
-            position: Vec3::ZERO,
-            kind: PunctualKind::Directional {
-                direction: -Vec3::Y,
-            },
-            intensity: Spectrum::Constant(1.0),
-        });
+        s.lights.push(sun(-Vec3::Y, 1.0));
         let sp = SpectralScene::new(&s, BinGrid::with_bins(4).unwrap());
         let ps = PhotonSettings {
             photons: 400_000,
@@ -1016,7 +1013,6 @@ fn a_sun_through_a_glass_pane_lights_the_floor_by_the_slabs_transmittance() {
     // on the flux, 4.1. The camera sits between the pane and the floor; the floor's light
     // that the pane reflects back down (ρ·R_diffuse, under 0.2 % at ρ = 0.02) is the only
     // other term.
-    use prismap_engine::scene::{PunctualKind, PunctualLight};
     let (rho, e) = (0.02, 50.0);
     // Fresnel's unpolarised reflectance from air into index n at incidence cos_i.
     let fresnel = |n: f64, cos_i: f64| {
@@ -1043,14 +1039,7 @@ fn a_sun_through_a_glass_pane_lights_the_floor_by_the_slabs_transmittance() {
             Camera::look_at(Vec3::new(0.0, 0.4, 0.01), Vec3::ZERO, Vec3::Y, 1.2),
         );
         let (sin, cos) = (theta.sin() as f32, theta.cos() as f32);
-        scene.lights.push(PunctualLight {
-            name: "Sun".into(),
-            position: Vec3::ZERO,
-            kind: PunctualKind::Directional {
-                direction: Vec3::new(sin, -cos, 0.0),
-            },
-            intensity: Spectrum::Constant(e),
-        });
+        scene.lights.push(sun(Vec3::new(sin, -cos, 0.0), e));
         let exact = rho * e * theta.cos() * t_slab / std::f64::consts::PI;
         for (storage, bins) in [(Storage::Compact, 8), (Storage::Full, 4), (Storage::Rgb, 3)] {
             for fg in [0, 4] {
@@ -1184,16 +1173,8 @@ fn split_photons_carry_each_bins_own_transmittance_through_dispersive_glass() {
     // glass splits takes one wavelength within its bin): 0.842 in the bluest bin, 0.856
     // in the reddest. Photons alone (fg 0) and with final gathering, full and compact (the
     // split photons stored as exact spikes).
-    use prismap_engine::scene::{PunctualKind, PunctualLight};
     let ior = IorModel::glass("N-SF11").unwrap();
-    let sun = PunctualLight {
-        name: "Sun".into(),
-        position: Vec3::ZERO,
-        kind: PunctualKind::Directional {
-            direction: -Vec3::Y,
-        },
-        intensity: Spectrum::Constant(50.0),
-    };
+    let sun = sun(-Vec3::Y, 50.0);
     let scene_with = |pane: bool| {
         let mut b = Builder::new();
         b.add(floor_4x4(), diffuse(0.02), None);
@@ -1285,7 +1266,6 @@ fn smooth_shading_takes_a_diffuse_surfaces_cosine_from_its_vertex_normals() {
     // light ρE·cos 30°/π, the cosine with the shading normal. With flat shading, ρE/π.
     // (A Sun below the shading normal's horizon gives nothing; the photons' own density,
     // fg 0, is the geometric surface's irradiance either way.)
-    use prismap_engine::scene::{PunctualKind, PunctualLight};
     let (rho, e) = (0.5, 3.0);
     let tilt = 30f32.to_radians();
     let n = Vec3::new(tilt.sin(), tilt.cos(), 0.0);
@@ -1308,12 +1288,7 @@ fn smooth_shading_takes_a_diffuse_surfaces_cosine_from_its_vertex_normals() {
         if smooth {
             scene.shading_normals = vec![[n; 3]; scene.triangles.len()];
         }
-        scene.lights.push(PunctualLight {
-            name: "Sun".into(),
-            position: Vec3::ZERO,
-            kind: PunctualKind::Directional { direction: sun_dir },
-            intensity: Spectrum::Constant(e),
-        });
+        scene.lights.push(sun(sun_dir, e));
         let geometric_cos = f64::from(-sun_dir.y);
         let exact = rho * e * cos / std::f64::consts::PI;
         for (storage, bins) in [(Storage::Compact, 8), (Storage::Rgb, 3)] {
@@ -1333,7 +1308,6 @@ fn a_smooth_shaded_diffuse_ball_looks_like_a_finely_tessellated_one() {
     // Blender's smooth shading: a 12 × 24 UV sphere with its exact vertex normals, under
     // a Sun, against a 96 × 192 one. The flat-shaded coarse ball shows its facets (every
     // facet one cosine); the smooth one shades each point by its interpolated normal.
-    use prismap_engine::scene::{PunctualKind, PunctualLight};
     let image = |rings: usize, smooth: bool| {
         let (tris, normals) = uv_sphere(Vec3::ZERO, 1.0, rings, 2 * rings);
         let mut b = Builder::new();
@@ -1345,14 +1319,8 @@ fn a_smooth_shaded_diffuse_ball_looks_like_a_finely_tessellated_one() {
         if smooth {
             s.shading_normals = normals;
         }
-        s.lights.push(PunctualLight {
-            name: "Sun".into(),
-            position: Vec3::ZERO,
-            kind: PunctualKind::Directional {
-                direction: Vec3::new(-0.5, -0.6, -0.62).normalize(),
-            },
-            intensity: Spectrum::Constant(3.0),
-        });
+        s.lights
+            .push(sun(Vec3::new(-0.5, -0.6, -0.62).normalize(), 3.0));
         let mut r = RenderSession::new(&s, settings(Storage::Compact, 8, 4, 48, 10_000)).unwrap();
         for _ in 0..4 {
             r.run_pass().unwrap();
@@ -1377,7 +1345,7 @@ fn a_cut_out_canopy_passes_sunlight_where_it_has_holes() {
     // 0.5 cutoff): all hole, the floor gets the whole Sun, ρE/π, by shadow rays (fg 4)
     // and by photons (fg 0). Alpha 0.8: a roof, the floor is dark. BLEND at alpha 0.3: a
     // veil that passes 70 %.
-    use prismap_engine::scene::{AlphaMask, PunctualKind, PunctualLight};
+    use prismap_engine::scene::AlphaMask;
     let (rho, e) = (0.5, 3.0);
     let full = rho * e / std::f64::consts::PI;
     for (alpha, blend, exact) in [
@@ -1402,14 +1370,7 @@ fn a_cut_out_canopy_passes_sunlight_where_it_has_holes() {
             factor: alpha,
             blend,
         });
-        scene.lights.push(PunctualLight {
-            name: "Sun".into(),
-            position: Vec3::ZERO,
-            kind: PunctualKind::Directional {
-                direction: -Vec3::Y,
-            },
-            intensity: Spectrum::Constant(e),
-        });
+        scene.lights.push(sun(-Vec3::Y, e));
         for fg in [0, 4] {
             let mean = mean_luminance(&scene, settings(Storage::Compact, 8, fg, 16, 40_000), 4);
             println!("alpha {alpha} blend {blend} fg {fg}: floor {mean:.4} (exact {exact:.4})");
@@ -1429,7 +1390,6 @@ fn a_normal_map_tilts_the_shading_normal_the_way_gltf_defines_it() {
     // the side the normal leans to, the cosine is 1 (ρE/π); from the other, cos 60° = ½;
     // without the map, cos 30°.
     use prismap_engine::scene::texture::{Texture, TextureRef, Wrap};
-    use prismap_engine::scene::{PunctualKind, PunctualLight};
     let (rho, e) = (0.5, 3.0);
     let (s, c) = (0.5f32, 30f32.to_radians().cos());
     let map = |m: Vec3| TextureRef {
@@ -1451,7 +1411,7 @@ fn a_normal_map_tilts_the_shading_normal_the_way_gltf_defines_it() {
         (Some(Vec3::new(0.0, s, c)), Vec3::new(0.0, -c, s), 1.0),
         (Some(Vec3::new(0.0, s, c)), Vec3::new(0.0, -c, -s), 0.5),
     ];
-    for (m, sun, cos) in cases {
+    for (m, towards, cos) in cases {
         let mut b = Builder::new();
         b.add(floor_4x4(), diffuse(rho), None);
         let mut scene = b.scene(
@@ -1461,18 +1421,13 @@ fn a_normal_map_tilts_the_shading_normal_the_way_gltf_defines_it() {
         let uv = |p: Vec3| glam::Vec2::new((p.x + 2.0) / 4.0, (p.z + 2.0) / 4.0);
         scene.triangle_uvs = scene.triangles.iter().map(|t| t.map(uv)).collect();
         scene.materials[0].normal_texture = m.map(|m| (map(m), 1.0));
-        scene.lights.push(PunctualLight {
-            name: "Sun".into(),
-            position: Vec3::ZERO,
-            kind: PunctualKind::Directional { direction: sun },
-            intensity: Spectrum::Constant(e),
-        });
+        scene.lights.push(sun(towards, e));
         let exact = rho * e * f64::from(cos) / std::f64::consts::PI;
         let mean = mean_luminance(&scene, settings(Storage::Compact, 8, 4, 16, 20_000), 2);
-        println!("map {m:?} sun {sun:?}: {mean:.4} (exact {exact:.4})");
+        println!("map {m:?} sun {towards:?}: {mean:.4} (exact {exact:.4})");
         assert!(
             (mean / exact - 1.0).abs() < 2e-3,
-            "map {m:?} sun {sun:?}: {mean} against ρE·cos/π = {exact}"
+            "map {m:?} sun {towards:?}: {mean} against ρE·cos/π = {exact}"
         );
     }
 }
