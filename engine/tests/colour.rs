@@ -108,6 +108,7 @@ fn chart(material: impl Fn([f64; 3]) -> (MaterialKind, Option<Spectrum>)) -> Sce
         shading_normals: vec![],
         triangle_uvs: vec![],
         triangle_colors: vec![],
+        triangle_tangents: vec![],
         materials,
         lights: vec![],
         camera: camera(),

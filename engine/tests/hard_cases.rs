@@ -354,6 +354,7 @@ fn a_black_clamped_negative_emitter_renders_finite_and_black() {
         shading_normals: vec![],
         triangle_uvs: vec![],
         triangle_colors: vec![],
+        triangle_tangents: vec![],
         materials: vec![Material {
             name: "m".into(),
             kind: MaterialKind::Diffuse {

@@ -102,6 +102,7 @@ impl Builder {
             shading_normals: vec![],
             triangle_uvs: vec![],
             triangle_colors: vec![],
+            triangle_tangents: vec![],
             materials: self.materials,
             lights: vec![],
             camera,

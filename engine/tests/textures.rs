@@ -693,11 +693,12 @@ fn a_normal_texture_loads_linear_with_its_scale() {
 }
 
 #[test]
-fn blenders_normal_map_loads_with_tangents_from_its_texture_coordinates() {
+fn blenders_normal_map_gets_the_same_frame_from_its_tangents_and_its_texture_coordinates() {
     // scenes/blender/normal-mapped.glb (make_blender_fixtures.py, Blender 5.0): a Normal
-    // Map node exports as normalTexture (with a TANGENT attribute, which prismap does not
-    // read: the frame comes from the texture coordinates). On the plane, ∂p/∂u and −∂p/∂v
-    // are perpendicular and in the plane.
+    // Map node exports as normalTexture, here with a TANGENT attribute. The frame prismap
+    // builds from the texture coordinates alone (for files without tangents, Blender's
+    // default) is, on the plane, ∂p/∂u and −∂p/∂v: perpendicular, in the plane, and the
+    // same as the file's tangents.
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../scenes/blender/normal-mapped.glb");
     let s = scene::load(&path).unwrap();

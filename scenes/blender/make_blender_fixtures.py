@@ -337,8 +337,8 @@ def normal_mapped():
     cam = bpy.data.objects["Camera"]
     cam.location = (0.0, -4.0, 4.0)
     cam.rotation_euler = direction_to_euler((0.0, 4.0, -4.0))
-    # With its TANGENT attribute, which the validator asks of a normal-mapped mesh
-    # (prismap does not read it: its frame comes from the texture coordinates).
+    # With its TANGENT attribute, which the validator asks of a normal-mapped mesh (and
+    # which the test compares with the frame prismap builds without it).
     export("normal-mapped.glb", tangents=True)
 
 

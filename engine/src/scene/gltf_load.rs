@@ -115,6 +115,7 @@ fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
             shading_normals: Vec::new(),
             triangle_uvs: Vec::new(),
             triangle_colors: Vec::new(),
+            triangle_tangents: Vec::new(),
             materials: Vec::new(),
             lights: Vec::new(),
             environment: None,
@@ -623,6 +624,26 @@ impl Walk<'_> {
             .read_tex_coords(0)
             .map(|t| t.into_f32().collect())
             .filter(|t: &Vec<[f32; 2]>| t.len() == positions.len());
+        // TANGENT (xyz, handedness w) into world space: a tangent transforms as a vector,
+        // and a mirroring transform flips the handedness. A non-finite one is dropped.
+        let linear = glam::Mat3::from_mat4(*world);
+        let flip = if linear.determinant() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let tangents: Option<Vec<glam::Vec4>> = reader
+            .read_tangents()
+            .map(|t| {
+                t.map(|[x, y, z, w]| {
+                    let v = linear * Vec3::new(x, y, z);
+                    glam::Vec4::new(v.x, v.y, v.z, w.signum() * flip)
+                })
+                .collect()
+            })
+            .filter(|t: &Vec<glam::Vec4>| {
+                t.len() == positions.len() && t.iter().all(|v| v.is_finite())
+            });
         let colors = reader
             .read_colors(0)
             .map(|c| c.into_rgb_f32().map(Vec3::from).collect());
@@ -664,6 +685,15 @@ impl Walk<'_> {
                 filled,
                 uv,
                 [glam::Vec2::ZERO; 3],
+            );
+            let corner_tangents = tangents
+                .as_ref()
+                .map(|t| [0, 1, 2].map(|k| t[tri[k] as usize]));
+            push_per_triangle(
+                &mut self.out.triangle_tangents,
+                filled,
+                corner_tangents,
+                [glam::Vec4::ZERO; 3],
             );
             let corner_colors = colors
                 .as_ref()

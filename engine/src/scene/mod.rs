@@ -178,6 +178,10 @@ pub struct Scene {
     /// of each triangle, in triangle order; empty when no mesh has any. A triangle
     /// without them is white.
     pub triangle_colors: Vec<[Vec3; 3]>,
+    /// Per-vertex tangents (glTF `TANGENT`: world-space xyz, handedness ±1 in w) of each
+    /// triangle, in triangle order; empty when no mesh has any. Zero where a triangle has
+    /// none (its normal map's frame then comes from its texture coordinates).
+    pub triangle_tangents: Vec<[glam::Vec4; 3]>,
     pub materials: Vec<Material>,
     pub lights: Vec<PunctualLight>,
     /// Radiance of a uniform sky around the scene (seen where rays escape), if any: what a

@@ -88,6 +88,9 @@ pub struct SpectralScene {
     /// up it): the tangent frame of a normal map. Zero where no normal map applies or the
     /// texture coordinates are degenerate; empty when no material has a normal map.
     pub tangents: Vec<[Vec3; 2]>,
+    /// The file's own vertex tangents per triangle (glTF `TANGENT`, see
+    /// [`Scene::triangle_tangents`]): preferred to `tangents` where present.
+    pub vertex_tangents: Vec<[glam::Vec4; 3]>,
     pub materials: Vec<SMaterial>,
     pub lights: LightSet,
     /// Radiance of the uniform sky, seen by camera paths that escape (None: black).
@@ -165,6 +168,13 @@ impl SpectralScene {
                 Vec::new()
             },
             tangents,
+            vertex_tangents: if scene.triangle_tangents.len() == scene.triangles.len()
+                && materials.iter().any(|m| m.normal_map.is_some())
+            {
+                scene.triangle_tangents.clone()
+            } else {
+                Vec::new()
+            },
             triangle_colors: if scene.triangle_colors.len() == scene.triangles.len() {
                 scene.triangle_colors.clone()
             } else {
@@ -222,18 +232,28 @@ impl SpectralScene {
         let (Some(&[t, b]), Some(uv)) = (self.tangents.get(i), self.triangle_uvs.get(i)) else {
             return;
         };
+        let (b1, b2) = h.bary;
+        let b0 = 1.0 - b1 - b2;
+        // The outward interpolated normal (ns faces the side the ray came from).
+        let n = if h.front { h.ns } else { -h.ns };
+        // The file's tangents, interpolated (glTF: bitangent = w · n × t), else the
+        // triangle's own frame from its texture coordinates.
+        let (t, b) = match self.vertex_tangents.get(i) {
+            Some(vt) if vt.iter().all(|v| v.w != 0.0) => {
+                let t = (vt[0] * b0 + vt[1] * b1 + vt[2] * b2).truncate();
+                (t, n.cross(t) * vt[0].w)
+            }
+            _ => (t, b),
+        };
         if t == Vec3::ZERO {
             return;
         }
-        let (b1, b2) = h.bary;
-        let c = tex.sample(uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2);
+        let c = tex.sample(uv[0] * b0 + uv[1] * b1 + uv[2] * b2);
         let m = Vec3::new(
             (2.0 * c[0] - 1.0) * scale,
             (2.0 * c[1] - 1.0) * scale,
             2.0 * c[2] - 1.0,
         );
-        // The outward interpolated normal (ns faces the side the ray came from).
-        let n = if h.front { h.ns } else { -h.ns };
         let t = (t - n * n.dot(t)).normalize_or_zero();
         let b = (b - n * n.dot(b) - t * t.dot(b)).normalize_or_zero();
         let tilted = (t * m.x + b * m.y + n * m.z).normalize_or_zero();
