@@ -758,3 +758,24 @@ fn a_blended_veil_lets_one_minus_alpha_of_the_sky_through() {
         );
     }
 }
+
+#[test]
+fn material_extensions_prismap_does_not_read_are_named_with_what_the_render_lacks() {
+    // Blender writes KHR_materials_specular, _clearcoat, _sheen… in extensionsUsed; each
+    // that prismap ignores is named once, with the look it goes without.
+    let white = [[255u8; 4]; 6].concat();
+    let text = vertex_coloured_quad_gltf((&white, 5121, true, "VEC4"), [1.0; 3], "").replacen(
+        r#"{"asset""#,
+        r#"{"extensionsUsed":["KHR_materials_clearcoat","KHR_texture_transform","EXT_example_unknown"],"asset""#,
+        1,
+    );
+    let s = scene::load_from_slice(text.as_bytes(), "coat.gltf", None).unwrap();
+    let named: Vec<&String> = s
+        .warnings
+        .iter()
+        .filter(|w| w.starts_with("extensionsUsed"))
+        .collect();
+    assert_eq!(named.len(), 2, "{:?}", s.warnings);
+    assert!(named[0].contains("KHR_materials_clearcoat") && named[0].contains("clear lacquer"));
+    assert!(named[1].contains("EXT_example_unknown") && named[1].contains("ignored"));
+}

@@ -24,6 +24,55 @@ const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_texture_transform",
 ];
 
+/// What a material extension that prismap does not read (listed in `extensionsUsed`,
+/// not required) would have added: the look the render goes without.
+const IGNORED_MATERIAL_EXTENSIONS: &[(&str, &str)] = &[
+    (
+        "KHR_materials_specular",
+        "the specular strength and tint (dielectric F0 from the IOR is used)",
+    ),
+    ("KHR_materials_clearcoat", "the clear lacquer layer"),
+    ("KHR_materials_sheen", "the cloth sheen"),
+    ("KHR_materials_iridescence", "the thin-film iridescence"),
+    ("KHR_materials_anisotropy", "the anisotropic highlights"),
+    (
+        "KHR_materials_unlit",
+        "unlit shading (the surfaces are lit)",
+    ),
+    (
+        "KHR_materials_diffuse_transmission",
+        "light through thin diffuse surfaces (leaves, paper)",
+    ),
+    (
+        "KHR_materials_variants",
+        "material variants (the default materials are used)",
+    ),
+    (
+        "KHR_materials_pbrSpecularGlossiness",
+        "the specular-glossiness material (its base is not read)",
+    ),
+];
+
+/// One warning per extension the file uses but prismap does not read (and does not
+/// need: an unsupported required one is an error, see [`check_required_names`]).
+fn ignored_extensions(doc: &gltf::Document) -> Vec<String> {
+    let required: Vec<&str> = doc.extensions_required().collect();
+    doc.extensions_used()
+        .filter(|e| !SUPPORTED_EXTENSIONS.contains(e) && !required.contains(e))
+        .map(|e| {
+            match IGNORED_MATERIAL_EXTENSIONS
+                .iter()
+                .find(|(name, _)| *name == e)
+            {
+                Some((_, what)) => {
+                    format!("extensionsUsed: '{e}' is not read: rendered without {what}")
+                }
+                None => format!("extensionsUsed: '{e}' is not read and is ignored"),
+            }
+        })
+        .collect()
+}
+
 /// Deepest node hierarchy accepted (deeper is almost surely a cycle).
 const MAX_NODE_DEPTH: usize = 64;
 
@@ -120,7 +169,7 @@ fn load_inner(bytes: &[u8], ctx: &Ctx) -> Result<Scene, SceneError> {
             lights: Vec::new(),
             environment: None,
             camera: Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 0.8),
-            warnings: Vec::new(),
+            warnings: ignored_extensions(doc),
         },
     };
     walk.nodes(root)?;
