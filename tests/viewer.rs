@@ -712,3 +712,38 @@ fn every_control_explains_itself_on_hover() {
         first.len() + more.len()
     );
 }
+
+#[test]
+fn the_first_full_pass_replaces_the_quick_preview_even_when_it_is_the_last() {
+    // The quick preview and the first full pass both count one pass: the viewer took them
+    // for the same image, so with the render stopped after one pass (`view
+    // --after-passes 1 --screenshot …`) the full pass was never shown and the screenshot
+    // never taken.
+    let ctx = egui::Context::default();
+    let capture = prismap::app::Capture {
+        path: std::env::temp_dir().join("prismap-first-pass.png"),
+        after_passes: 1,
+        compare_with: None,
+    };
+    // A full pass long enough (about a second) that the preview is on screen first.
+    let slow = RenderSettings {
+        width: 192,
+        height: 192,
+        photons_per_pass: 50_000,
+        final_gather_rays: 16,
+        ..settings()
+    };
+    let app = ViewerApp::new(
+        &ctx,
+        SceneSource::Builtin("cornell-box".into()),
+        slow,
+        Some(capture),
+    );
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1400.0, 1000.0))
+        .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app);
+    wait_until(&mut h, "the quick preview", |a| {
+        a.snapshot.as_ref().is_some_and(|s| s.preview)
+    });
+    wait_until(&mut h, "the first full pass on screen", |a| passes(a) == 1);
+}

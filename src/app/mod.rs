@@ -109,7 +109,7 @@ pub struct ViewerApp {
     pub tone: ToneMap,
     pub paused: bool,
     texture: Option<egui::TextureHandle>,
-    shown: Option<(u64, u64, bool)>,
+    shown: Option<(u64, bool, u64, bool)>,
     shown_tone: (f32, ToneMap),
     pub snapshot: Option<Snapshot>,
     /// The probed pixel and up to three pinned ones.
@@ -447,7 +447,14 @@ impl ViewerApp {
     /// Pulls the newest snapshot and uploads it to the texture when it is new.
     fn poll(&mut self, ctx: &egui::Context) {
         if let Some(s) = self.worker.latest() {
-            let key = (s.generation, s.stats.passes, s.denoised.is_some());
+            // The quick preview and the first full pass both count one pass: `preview` tells
+            // them apart, or the first full pass would never be shown.
+            let key = (
+                s.generation,
+                s.preview,
+                s.stats.passes,
+                s.denoised.is_some(),
+            );
             if self.shown != Some(key) {
                 if self.first_image_latency.is_none() {
                     self.first_image_latency = Some(self.changed_at.elapsed().as_secs_f64());

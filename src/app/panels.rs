@@ -22,6 +22,8 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                 egui::ComboBox::from_label("Scene")
                     .selected_text(app.source().label())
                     .width(190.0)
+                    // A long path is elided to the box (the list shows it whole).
+                    .truncate()
                     .show_ui(ui, |ui| {
                         for (name, _) in crate::scene::BUILTIN {
                             let s = SceneSource::Builtin(name.to_string());
