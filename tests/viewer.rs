@@ -645,7 +645,14 @@ fn every_control_explains_itself_on_hover() {
     let mut h = harness_sized("prism", 1920.0, 1080.0);
     h.ctx
         .global_style_mut(|s| s.interaction.tooltip_delay = 0.0);
-    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    // Two passes, so that the noise estimate (odd against even passes) and its rows are
+    // on screen: a pass still in flight when the render pauses then moves nothing.
+    wait_until(&mut h, "two passes and a noise estimate", |a| {
+        passes(a) >= 2
+            && a.snapshot
+                .as_ref()
+                .is_some_and(|s| s.noise_psnr_db.is_some())
+    });
     h.key_press(egui::Key::Space);
     h.run_steps(4);
     let controls = |h: &Harness<'static, ViewerApp>| -> Vec<(String, egui::Rect)> {
