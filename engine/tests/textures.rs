@@ -779,3 +779,35 @@ fn material_extensions_prismap_does_not_read_are_named_with_what_the_render_lack
     assert!(named[0].contains("KHR_materials_clearcoat") && named[0].contains("clear lacquer"));
     assert!(named[1].contains("EXT_example_unknown") && named[1].contains("ignored"));
 }
+
+#[test]
+fn broken_tangents_are_dropped_with_a_warning() {
+    // A TANGENT attribute with a NaN: the loader names the primitive and keeps going
+    // (normal maps then take their frame from the texture coordinates).
+    let mut t = [[1.0f32, 0.0, 0.0, 1.0]; 6];
+    t[2][1] = f32::NAN;
+    let bytes: Vec<u8> = t.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+    let text = vertex_coloured_quad_gltf((&bytes, 5126, false, "VEC4"), [1.0; 3], "")
+        .replace(r#""COLOR_0":1"#, r#""TANGENT":1"#);
+    let s = scene::load_from_slice(text.as_bytes(), "bent.gltf", None).unwrap();
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("meshes[0].primitives[0]") && w.contains("TANGENT ignored")),
+        "{:?}",
+        s.warnings
+    );
+    assert!(s.triangle_tangents.is_empty());
+    // The same tangents without the NaN are kept, one per corner.
+    t[2][1] = 0.0;
+    let bytes: Vec<u8> = t.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+    let text = vertex_coloured_quad_gltf((&bytes, 5126, false, "VEC4"), [1.0; 3], "")
+        .replace(r#""COLOR_0":1"#, r#""TANGENT":1"#);
+    let s = scene::load_from_slice(text.as_bytes(), "bent.gltf", None).unwrap();
+    assert_eq!(s.triangle_tangents.len(), 2);
+    assert!(
+        s.warnings.iter().all(|w| !w.contains("TANGENT")),
+        "{:?}",
+        s.warnings
+    );
+}

@@ -298,6 +298,11 @@ fn check_buffers(doc: &gltf::Document, ctx: &Ctx) -> Result<(), SceneError> {
     Ok(())
 }
 
+/// A per-vertex attribute's values at triangle `tri`'s three corners, if it has one.
+fn corners<T: Copy>(attr: &Option<Vec<T>>, tri: &[u32]) -> Option<[T; 3]> {
+    attr.as_ref().map(|a| [0, 1, 2].map(|k| a[tri[k] as usize]))
+}
+
 /// Appends a triangle's attribute to a per-triangle list that exists only once some
 /// triangle has the attribute: earlier triangles are filled with `default` then.
 fn push_per_triangle<T: Copy>(
@@ -674,25 +679,29 @@ impl Walk<'_> {
             .map(|t| t.into_f32().collect())
             .filter(|t: &Vec<[f32; 2]>| t.len() == positions.len());
         // TANGENT (xyz, handedness w) into world space: a tangent transforms as a vector,
-        // and a mirroring transform flips the handedness. A non-finite one is dropped.
+        // and a mirroring transform flips the handedness. A broken set is dropped, with a warning.
         let linear = glam::Mat3::from_mat4(*world);
         let flip = if linear.determinant() < 0.0 {
             -1.0
         } else {
             1.0
         };
-        let tangents: Option<Vec<glam::Vec4>> = reader
-            .read_tangents()
-            .map(|t| {
-                t.map(|[x, y, z, w]| {
-                    let v = linear * Vec3::new(x, y, z);
-                    glam::Vec4::new(v.x, v.y, v.z, w.signum() * flip)
-                })
-                .collect()
+        let tangents: Option<Vec<glam::Vec4>> = reader.read_tangents().map(|t| {
+            t.map(|[x, y, z, w]| {
+                let v = linear * Vec3::new(x, y, z);
+                glam::Vec4::new(v.x, v.y, v.z, w.signum() * flip)
             })
-            .filter(|t: &Vec<glam::Vec4>| {
-                t.len() == positions.len() && t.iter().all(|v| v.is_finite())
-            });
+            .collect()
+        });
+        let tangents = match tangents {
+            Some(t) if t.len() != positions.len() || !t.iter().all(|v| v.is_finite()) => {
+                self.out.warnings.push(format!(
+                    "{pel}: TANGENT ignored (not one finite tangent per vertex): a normal map takes its frame from the texture coordinates"
+                ));
+                None
+            }
+            t => t,
+        };
         let colors = reader
             .read_colors(0)
             .map(|c| c.into_rgb_f32().map(Vec3::from).collect());
@@ -725,9 +734,7 @@ impl Walk<'_> {
             } else if !self.out.shading_normals.is_empty() {
                 self.out.shading_normals.push([geometric; 3]);
             }
-            let uv = uvs
-                .as_ref()
-                .map(|uv| [0, 1, 2].map(|k| glam::Vec2::from(uv[tri[k] as usize])));
+            let uv = corners(&uvs, tri).map(|c| c.map(glam::Vec2::from));
             let filled = self.out.triangles.len();
             push_per_triangle(
                 &mut self.out.triangle_uvs,
@@ -735,22 +742,16 @@ impl Walk<'_> {
                 uv,
                 [glam::Vec2::ZERO; 3],
             );
-            let corner_tangents = tangents
-                .as_ref()
-                .map(|t| [0, 1, 2].map(|k| t[tri[k] as usize]));
             push_per_triangle(
                 &mut self.out.triangle_tangents,
                 filled,
-                corner_tangents,
+                corners(&tangents, tri),
                 [glam::Vec4::ZERO; 3],
             );
-            let corner_colors = colors
-                .as_ref()
-                .map(|c| [0, 1, 2].map(|k| c[tri[k] as usize]));
             push_per_triangle(
                 &mut self.out.triangle_colors,
                 filled,
-                corner_colors,
+                corners(&colors, tri),
                 [Vec3::ONE; 3],
             );
             self.out.triangles.push(t);
