@@ -220,12 +220,18 @@ pub struct Kernel {
     /// Largest radius searched (the fixed radius when `k` is 0), scene units.
     pub r_max: f32,
     /// First radius searched: a range search there that finds k photons settles the
-    /// query; else one bounded k-nearest search out to `r_max` does (the typical k-nearest
-    /// radius is a good start).
+    /// query; else range searches at radii grown by the count found, up to `r_max`, do
+    /// (the typical k-nearest radius is a good start).
     pub r_start: f32,
     /// This pass's Knaus–Zwicker factor r_k/r_1 (≤ 1).
     pub shrink: f32,
 }
+
+/// A regrown k-nearest search aims for this many times k photons (the photon count
+/// grows as r², so the radius grows by √(margin·k / found)): too small and it searches
+/// a third time, too large and it visits photons it discards. 1.3 was fastest of
+/// 1.0–2.0 on the gather benchmark (BENCHMARKS.md, session 21).
+const KNN_GROWTH_MARGIN: f32 = 1.3;
 
 /// Fewest neighbours [`Kernel::adaptive`] searches for; below this the shrink is applied
 /// to the radius instead.
@@ -516,7 +522,11 @@ impl PhotonMap {
         }
         // The k nearest within r_max are the k nearest within any smaller radius that
         // holds k photons: most queries find them within the first radius (a range search
-        // and a selection); the rest run one bounded k-nearest search out to r_max.
+        // and a selection); the rest search again with the radius grown by the photon
+        // count found so far (density ~ count / r², so the next radius should hold
+        // about KNN_GROWTH_MARGIN·k), never past r_max. A range search with a selection
+        // is cheaper per photon than a heap-based k-nearest search (measured in
+        // BENCHMARKS.md, session 21).
         let r = kernel.r_start.clamp(f32::MIN_POSITIVE, kernel.r_max);
         found.clear();
         // Nothing within the cap: what the range search below would conclude, without it
@@ -530,11 +540,22 @@ impl PhotonMap {
                 r_k: r2_k.sqrt(),
             };
         }
-        kdtree::for_each_within(&self.positions, &self.axes, p, r * r, |i, d2| {
-            if accept(i) {
-                found.push((d2, i as u32));
+        let mut r = r;
+        loop {
+            found.clear();
+            kdtree::for_each_within(&self.positions, &self.axes, p, r * r, |i, d2| {
+                if accept(i) {
+                    found.push((d2, i as u32));
+                }
+            });
+            if found.len() >= kernel.k || r >= kernel.r_max {
+                break;
             }
-        });
+            let grow = ((KNN_GROWTH_MARGIN * kernel.k as f32) / found.len().max(1) as f32)
+                .sqrt()
+                .max(1.25);
+            r = (r * grow).min(kernel.r_max);
+        }
         let r2_k = if found.len() >= kernel.k {
             let by_distance = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0);
             let (_, kth, _) = found.select_nth_unstable_by(kernel.k - 1, by_distance);
@@ -545,18 +566,8 @@ impl PhotonMap {
                 found.truncate(kernel.k);
             }
             r2_k
-        } else if r < kernel.r_max {
-            let r2_max = kernel.r_max * kernel.r_max;
-            kdtree::k_nearest_within(
-                &self.positions,
-                &self.axes,
-                p,
-                kernel.k,
-                r2_max,
-                accept,
-                found,
-            )
         } else {
+            // Fewer than k within r_max: the search stopped at r_max.
             r * r
         };
         let r2 = r2_k * kernel.shrink * kernel.shrink;
@@ -779,6 +790,66 @@ pub(crate) mod tests {
             b.push(grid, Vec3::new(x, y, 0.0), Vec3::Z, &[1e-4; 4]);
         }
         PhotonMap::build(b)
+    }
+
+    /// Whatever radius the search starts at — far too small, about right, past the cap —
+    /// the estimate's r_k is the k-th nearest same-surface photon within r_max (brute
+    /// force), and it sums exactly the photons inside shrink·r_k.
+    #[test]
+    fn a_k_nearest_estimate_finds_the_brute_force_neighbours_from_any_start_radius() {
+        let grid = BinGrid::with_bins(4).unwrap();
+        let mut b = PhotonBatch::new(Record::Full, &grid);
+        let mut rng = crate::sampling::Rng::stream(9, 0, 0, crate::sampling::Purpose::Photon);
+        for i in 0..20_000 {
+            let [x, y] = rng.next_2d();
+            // Every fifth photon lies on a perpendicular wall through the same points: it
+            // is near in space but not on the query's surface.
+            let n = if i % 5 == 0 { Vec3::X } else { Vec3::Z };
+            b.push(&grid, Vec3::new(x, y, 0.0), n, &[1.0; 4]);
+        }
+        let map = PhotonMap::build(b);
+        let (mut found, mut out) = (Vec::new(), vec![0.0; 4]);
+        let (k, r_max) = (48usize, 0.05f32);
+        let queries = [
+            Vec3::new(0.5, 0.5, 0.0),
+            Vec3::new(0.01, 0.99, 0.0),
+            Vec3::new(1.03, 0.5, 0.0), // off the edge: fewer than k within the cap
+            Vec3::new(1.2, 0.5, 0.0),  // nothing within the cap
+            Vec3::new(0.3, 0.7, 0.004), // slightly above the plane
+        ];
+        for p in queries {
+            let mut d2: Vec<f32> = (0..map.len())
+                .filter(|&i| map.same_surface(i, p, Vec3::Z))
+                .map(|i| {
+                    let q = map.positions[i];
+                    let d = [p.x - q[0], p.y - q[1], p.z - q[2]];
+                    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+                })
+                .filter(|&d2| d2 <= r_max * r_max)
+                .collect();
+            d2.sort_by(f32::total_cmp);
+            let want_rk = d2.get(k - 1).map_or(r_max, |d| d.sqrt());
+            for r_start in [1e-5f32, 0.002, 0.01, 0.03, 0.05, 0.5] {
+                for shrink in [1.0f32, 0.7] {
+                    let kernel = Kernel {
+                        k,
+                        r_max,
+                        r_start,
+                        shrink,
+                    };
+                    out.fill(0.0);
+                    let est = map.estimate(&grid, p, Vec3::Z, kernel, &mut found, &mut out);
+                    assert!(
+                        (est.r_k - want_rk).abs() <= 1e-6 * want_rk,
+                        "{p} {kernel:?}: r_k {} against {want_rk}",
+                        est.r_k
+                    );
+                    let r2 = est.r * est.r;
+                    let inside = d2.iter().filter(|&&d| d < r2).count();
+                    assert_eq!(out[0], inside as f32, "{p} {kernel:?}: {est:?}");
+                }
+            }
+        }
     }
 
     #[test]
