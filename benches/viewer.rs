@@ -59,6 +59,12 @@ fn main() {
     let mut waiting = true;
     let mut generation_start = Instant::now();
     let mut last_passes = 0;
+    // Per generation: when its first full pass showed, and (seconds, passes) from then to
+    // its last pass seen: the start-up cost and the steady rate, told apart.
+    let mut first_full: Option<f64> = None;
+    let mut last_full_at = 0.0;
+    let mut firsts = Vec::new();
+    let mut steady = Vec::new();
     let mut next_change = Instant::now() + Duration::from_secs(6);
     while start.elapsed().as_secs_f64() < seconds {
         let t = Instant::now();
@@ -70,12 +76,21 @@ fn main() {
                 latencies.push(change_at.elapsed().as_secs_f64() * 1e3);
                 waiting = false;
             }
-            if !s.preview {
+            if !s.preview && s.stats.passes > last_passes {
+                let at = generation_start.elapsed().as_secs_f64();
+                if first_full.is_none() {
+                    first_full = Some(at);
+                }
                 last_passes = s.stats.passes;
+                last_full_at = at;
             }
         }
         if Instant::now() >= next_change {
             full_passes.push((generation_start.elapsed().as_secs_f64(), last_passes));
+            if let Some(t0) = first_full.take() {
+                firsts.push(t0);
+                steady.push((last_full_at - t0, last_passes.saturating_sub(1)));
+            }
             let app = h.state_mut();
             app.settings.storage = if app.settings.storage == Storage::Compact {
                 Storage::Full
@@ -95,6 +110,10 @@ fn main() {
         }
     }
     full_passes.push((generation_start.elapsed().as_secs_f64(), last_passes));
+    if let Some(t0) = first_full {
+        firsts.push(t0);
+        steady.push((last_full_at - t0, last_passes.saturating_sub(1)));
+    }
     let n = frames.len();
     let med = percentile(&mut frames, 0.5);
     let p99 = percentile(&mut frames, 0.99);
@@ -137,4 +156,15 @@ fn main() {
         "full-quality passes per second: {:.2} ({passes} passes in {secs:.1} s of rendering)",
         passes as f64 / secs.max(1e-9)
     );
+    if !firsts.is_empty() {
+        let (ssecs, spasses) = steady
+            .iter()
+            .fold((0.0, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
+        println!(
+            "of which: first full pass {:.2} s after a restart (median of {}), then {:.2} passes per second ({spasses} passes in {ssecs:.1} s)",
+            percentile(&mut firsts.clone(), 0.5),
+            firsts.len(),
+            spasses as f64 / ssecs.max(1e-9)
+        );
+    }
 }
