@@ -3,6 +3,7 @@
 
 use glam::Vec3;
 
+use std::cell::Cell;
 use std::sync::OnceLock;
 
 use super::kdtree;
@@ -295,6 +296,35 @@ pub struct Estimate {
     pub r_k: f32,
 }
 
+/// [`PhotonMap::same_surface`] for one query, remembering the facing test's answer for
+/// the last normal code seen: the photons of one flat surface share a code, so most
+/// candidates skip the octahedral decode (the same answers, tested).
+struct SurfaceTest<'a> {
+    map: &'a PhotonMap,
+    p: Vec3,
+    n: Vec3,
+    last: Cell<(u32, bool)>,
+}
+
+impl SurfaceTest<'_> {
+    #[inline(always)]
+    fn accepts(&self, i: usize) -> bool {
+        let d = Vec3::from_array(self.map.positions[i]) - self.p;
+        let h = d.dot(self.n);
+        if h * h > (1.0 / 64.0) * d.length_squared() + 1e-12 {
+            return false;
+        }
+        let code = self.map.normal_code(i);
+        let (last, facing) = self.last.get();
+        if code == last {
+            return facing;
+        }
+        let facing = super::record::oct_within(code, self.n, MIN_NORMAL_COS);
+        self.last.set((code, facing));
+        facing
+    }
+}
+
 /// A searchable photon map.
 #[derive(Clone, Debug)]
 pub struct PhotonMap {
@@ -469,7 +499,8 @@ impl PhotonMap {
     /// so a curved surface still counts out to a quarter of its radius of curvature, and a
     /// parallel surface a gap g away only beyond 8g). Density estimation has no visibility:
     /// coplanar surfaces on both sides of a wall still share photons within one radius.
-    #[inline]
+    /// (The searches run [`SurfaceTest`], which answers the same; this is its reference.)
+    #[cfg(test)]
     fn same_surface(&self, i: usize, p: Vec3, n: Vec3) -> bool {
         let d = Vec3::from_array(self.positions[i]) - p;
         let h = d.dot(n);
@@ -477,9 +508,19 @@ impl PhotonMap {
             && super::record::oct_within(self.normal_code(i), n, MIN_NORMAL_COS)
     }
 
+    /// [`Self::same_surface`] for the candidates of one query at `p` facing `n`.
+    fn surface_test(&self, p: Vec3, n: Vec3) -> SurfaceTest<'_> {
+        SurfaceTest {
+            map: self,
+            p,
+            n,
+            last: Cell::new((0, super::record::oct_within(0, n, MIN_NORMAL_COS))),
+        }
+    }
+
     /// Adds to `out` (N bins) the flux of the photons of a density estimate at `p` on a
     /// surface facing `n`, and returns the estimate's radius r (the caller divides by
-    /// π r²) and its k-nearest radius. Only photons on the same surface and side count ([`Self::same_surface`]).
+    /// π r²) and its k-nearest radius. Only photons on the same surface and side count (`same_surface`).
     ///
     /// With `kernel.k > 0` the radius adapts per query (Jensen's k-nearest-neighbour
     /// estimate): r_k is the distance to the k-th nearest photon within `r_max` (or
@@ -498,7 +539,8 @@ impl PhotonMap {
         found: &mut Vec<(f32, u32)>,
         out: &mut [f32],
     ) -> Estimate {
-        let accept = |i: usize| self.same_surface(i, p, n);
+        let test = self.surface_test(p, n);
+        let accept = |i: usize| test.accepts(i);
         if kernel.k == 0 {
             let r = kernel.r_max * kernel.shrink;
             found.clear();
@@ -587,6 +629,7 @@ impl PhotonMap {
         kernel: Kernel,
         found: &mut Vec<(f32, u32)>,
     ) -> f32 {
+        let test = self.surface_test(p, n);
         while found.len() < kernel.k && r < kernel.r_max {
             let grow = ((KNN_GROWTH_MARGIN * kernel.k as f32) / found.len().max(1) as f32)
                 .sqrt()
@@ -594,7 +637,7 @@ impl PhotonMap {
             r = (r * grow).min(kernel.r_max);
             found.clear();
             kdtree::for_each_within(&self.positions, &self.axes, p, r * r, |i, d2| {
-                if self.same_surface(i, p, n) {
+                if test.accepts(i) {
                     found.push((d2, i as u32));
                 }
             });
@@ -813,6 +856,43 @@ pub(crate) mod tests {
             b.push(grid, Vec3::new(x, y, 0.0), Vec3::Z, &[1e-4; 4]);
         }
         PhotonMap::build(b)
+    }
+
+    /// The remembered facing test answers as the plain one for every candidate, in runs of
+    /// one normal and across changes of normal, near the 37° limit too.
+    #[test]
+    fn the_surface_test_answers_as_same_surface_does() {
+        let grid = BinGrid::with_bins(4).unwrap();
+        let mut b = PhotonBatch::new(Record::Full, &grid);
+        let mut rng = crate::sampling::Rng::stream(4, 0, 0, crate::sampling::Purpose::Photon);
+        let tilt = MIN_NORMAL_COS.acos();
+        let mut n = Vec3::Z;
+        for i in 0..4000 {
+            // Runs of one normal, some just inside and some just outside 37° of +z.
+            if i % 7 == 0 {
+                let [u, v] = rng.next_2d();
+                let a = tilt + (u - 0.5) * 0.02 + if v < 0.3 { 1.0 } else { 0.0 };
+                let phi = v * std::f32::consts::TAU;
+                n = Vec3::new(a.sin() * phi.cos(), a.sin() * phi.sin(), a.cos());
+            }
+            let [x, y] = rng.next_2d();
+            b.push(&grid, Vec3::new(x, y, 0.01 * (x - y)), n, &[1.0; 4]);
+        }
+        let map = PhotonMap::build(b);
+        let (mut agree, mut accepted) = (0, 0);
+        for q in 0..20 {
+            let p = Vec3::new(0.05 * q as f32, 0.5, 0.0);
+            let test = map.surface_test(p, Vec3::Z);
+            for i in 0..map.len() {
+                let want = map.same_surface(i, p, Vec3::Z);
+                assert_eq!(test.accepts(i), want, "photon {i}, query {q}");
+                agree += 1;
+                accepted += usize::from(want);
+            }
+        }
+        assert_eq!(agree, 20 * 4000);
+        // Both answers occur often: the test is not vacuous.
+        assert!((10_000..70_000).contains(&accepted), "{accepted}");
     }
 
     /// Whatever radius the search starts at — far too small, about right, past the cap —
