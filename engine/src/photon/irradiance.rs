@@ -15,8 +15,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::kdtree;
-use super::map::{Kernel, PhotonMap};
-use super::record::{Record, oct_decode, oct_within};
+use super::map::{Kernel, PhotonMap, SurfaceTest};
+use super::record::{Record, oct_decode};
 use crate::spectral::{BinGrid, spd};
 
 /// Cache points estimated in a row by one thread, the search radius carried along.
@@ -214,12 +214,8 @@ impl IrradianceCache {
         found: &mut Vec<(f32, u32)>,
         out: &mut [f32],
     ) -> bool {
-        let accept = |i: usize| {
-            let d = Vec3::from_array(self.positions[i]) - p;
-            let h = d.dot(n);
-            h * h <= (1.0 / 64.0) * d.length_squared() + 1e-12
-                && oct_within(self.normals[i], n, super::map::MIN_NORMAL_COS)
-        };
+        let test = SurfaceTest::new(&self.positions, |i| self.normals[i], p, n);
+        let accept = |i: usize| test.accepts(i);
         // The point in the query's own cell, if it has one on the query's surface: within
         // a cell's diagonal of it, which is as close as the points' spacing resolves (a
         // hash probe instead of a tree search for most rays). Else one nearest-neighbour

@@ -296,25 +296,41 @@ pub struct Estimate {
     pub r_k: f32,
 }
 
-/// [`PhotonMap::same_surface`] for one query, remembering the facing test's answer for
-/// the last normal code seen: the photons of one flat surface share a code, so most
-/// candidates skip the octahedral decode (the same answers, tested).
-struct SurfaceTest<'a> {
-    map: &'a PhotonMap,
+/// The same-surface test of [`PhotonMap::estimate`] (and of the irradiance cache's
+/// lookups) for one query at `p` facing `n`, remembering the facing test's answer for the
+/// last normal code seen: the points of one flat surface share a code, so most candidates
+/// skip the octahedral decode (the same answers, tested).
+pub(super) struct SurfaceTest<'a, C> {
+    positions: &'a [[f32; 3]],
+    /// Point i's octahedral normal code.
+    code: C,
     p: Vec3,
     n: Vec3,
     last: Cell<(u32, bool)>,
 }
 
-impl SurfaceTest<'_> {
+impl<'a, C: Fn(usize) -> u32> SurfaceTest<'a, C> {
+    pub(super) fn new(positions: &'a [[f32; 3]], code: C, p: Vec3, n: Vec3) -> Self {
+        let last = Cell::new((0, super::record::oct_within(0, n, MIN_NORMAL_COS)));
+        Self {
+            positions,
+            code,
+            p,
+            n,
+            last,
+        }
+    }
+
+    /// Whether point `i` lies on the query's surface and side: its normal within 37° of
+    /// `n`, and within a flat slab about the query's tangent plane (|Δ·n| ≤ |Δ|/8).
     #[inline(always)]
-    fn accepts(&self, i: usize) -> bool {
-        let d = Vec3::from_array(self.map.positions[i]) - self.p;
+    pub(super) fn accepts(&self, i: usize) -> bool {
+        let d = Vec3::from_array(self.positions[i]) - self.p;
         let h = d.dot(self.n);
         if h * h > (1.0 / 64.0) * d.length_squared() + 1e-12 {
             return false;
         }
-        let code = self.map.normal_code(i);
+        let code = (self.code)(i);
         let (last, facing) = self.last.get();
         if code == last {
             return facing;
@@ -509,13 +525,8 @@ impl PhotonMap {
     }
 
     /// [`Self::same_surface`] for the candidates of one query at `p` facing `n`.
-    fn surface_test(&self, p: Vec3, n: Vec3) -> SurfaceTest<'_> {
-        SurfaceTest {
-            map: self,
-            p,
-            n,
-            last: Cell::new((0, super::record::oct_within(0, n, MIN_NORMAL_COS))),
-        }
+    fn surface_test(&self, p: Vec3, n: Vec3) -> SurfaceTest<'_, impl Fn(usize) -> u32 + '_> {
+        SurfaceTest::new(&self.positions, |i| self.normal_code(i), p, n)
     }
 
     /// Adds to `out` (N bins) the flux of the photons of a density estimate at `p` on a
