@@ -9,8 +9,8 @@ use std::sync::OnceLock;
 use super::kdtree;
 use super::occupancy::Occupancy;
 use super::record::{
-    PhotonHeader, Record, decode_spike, encode_spike, oct_from_16, oct_to_16, pack_record,
-    unpack_record,
+    NormalCode, PhotonHeader, Record, decode_spike, encode_spike, oct_from_16, oct_to_16,
+    pack_record, unpack_record,
 };
 use crate::spectral::smits::BranchSums;
 use crate::spectral::{BinGrid, spd};
@@ -130,7 +130,8 @@ impl PhotonBatch {
     /// Stores a photon's flux in this batch's format, with the landing surface's normal
     /// turned towards the side the photon came from. Photons with no (or non-finite) flux
     /// are never stored.
-    pub fn push(&mut self, grid: &BinGrid, pos: Vec3, normal: Vec3, flux: &[f32]) {
+    pub fn push(&mut self, grid: &BinGrid, pos: Vec3, normal: impl Into<NormalCode>, flux: &[f32]) {
+        let normal = normal.into();
         if !(spd::sum(flux) > 0.0) || !spd::all_finite(flux) {
             return;
         }
@@ -160,7 +161,7 @@ impl PhotonBatch {
         &mut self,
         grid: &BinGrid,
         pos: Vec3,
-        normal: Vec3,
+        normal: impl Into<NormalCode>,
         bin: usize,
         value: f32,
         n: usize,

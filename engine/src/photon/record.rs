@@ -171,11 +171,22 @@ pub struct PhotonHeader {
 
 const _: () = assert!(size_of::<PhotonHeader>() == 16);
 
+/// A unit normal as photon records store it: its octahedral code ([`oct_encode`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NormalCode(pub u32);
+
+impl From<Vec3> for NormalCode {
+    #[inline]
+    fn from(n: Vec3) -> Self {
+        Self(oct_encode(n))
+    }
+}
+
 impl PhotonHeader {
-    pub fn new(pos: Vec3, normal: Vec3) -> Self {
+    pub fn new(pos: Vec3, normal: impl Into<NormalCode>) -> Self {
         Self {
             pos: pos.to_array(),
-            normal: oct_encode(normal),
+            normal: normal.into().0,
         }
     }
 

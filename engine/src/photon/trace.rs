@@ -251,16 +251,17 @@ fn trace_one(
                     let caustic_path = caustic && path.specular_seen && !path.diffuse_seen;
                     // A photon's record at `scale` times its flux: a split photon's one
                     // bin, else the vector (scaled in `scaled` when it must be).
+                    let code = scene.normal_code(&hit);
                     let mut store = |map: &mut PhotonBatch, scale: f32| match path.single {
                         Some(b) => {
                             let n = path.flux.len();
-                            map.push_single(grid, p, nf, b, path.flux[b] * scale, n)
+                            map.push_single(grid, p, code, b, path.flux[b] * scale, n)
                         }
-                        None if scale == 1.0 => map.push(grid, p, nf, &path.flux),
+                        None if scale == 1.0 => map.push(grid, p, code, &path.flux),
                         None => {
                             scaled.clear();
                             scaled.extend(path.flux.iter().map(|f| f * scale));
-                            map.push(grid, p, nf, scaled)
+                            map.push(grid, p, code, scaled)
                         }
                     };
                     if !role.global {

@@ -8,6 +8,7 @@ use super::texture::TextureRef;
 use super::{Material, MaterialKind, PunctualKind, PunctualLight, Scene};
 use crate::geometry::{Accel, SurfaceHit, TriData, triangle_normal};
 use crate::lights::{Light, LightKind, LightSet};
+use crate::photon::record::{NormalCode, oct_encode};
 use crate::sampling::one_minus_cos;
 use crate::spectral::{BinGrid, Role, Spectrum, Transport, spd};
 
@@ -78,6 +79,10 @@ pub struct SpectralScene {
     pub grid: BinGrid,
     pub accel: Accel,
     pub tris: Vec<TriData>,
+    /// Each triangle's geometric normal as a photon record stores it (the octahedral code),
+    /// front and back: a photon's store reads it instead of encoding its hit's `nf`, the
+    /// same normal exactly (see [`Self::normal_code`]).
+    normal_codes: Vec<[u32; 2]>,
     /// Vertex shading normals per triangle (empty: flat shading everywhere).
     pub shading_normals: Vec<[Vec3; 3]>,
     /// Vertex texture coordinates per triangle (empty: none).
@@ -161,6 +166,10 @@ impl SpectralScene {
             lights: LightSet::new(lights, &tris),
             environment,
             grid,
+            normal_codes: tris
+                .iter()
+                .map(|t| [oct_encode(t.normal), oct_encode(-t.normal)])
+                .collect(),
             tris,
             triangle_uvs: if scene.triangle_uvs.len() == scene.triangles.len() {
                 scene.triangle_uvs.clone()
@@ -201,6 +210,13 @@ impl SpectralScene {
 
     pub fn diagonal(&self) -> f32 {
         (self.bounds.1 - self.bounds.0).length()
+    }
+
+    /// The octahedral code of `hit.nf` (the code `oct_encode(hit.nf)` gives, read from a
+    /// table: `nf` is the triangle's normal or its negation).
+    #[inline]
+    pub fn normal_code(&self, hit: &SurfaceHit) -> NormalCode {
+        NormalCode(self.normal_codes[hit.prim as usize][usize::from(!hit.front)])
     }
 
     /// The closest surface along a ray, with its normals and material.
@@ -735,4 +751,43 @@ fn punctual_light(
         spectrum,
         power: (y * solid_angle) as f32,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::{Purpose, Rng, uniform_sphere};
+
+    /// The table's code is the code of the hit's own `nf`, on front and back faces, flat
+    /// and smooth and normal-mapped triangles alike.
+    #[test]
+    fn a_hits_normal_code_is_the_code_of_its_facing_normal() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/blender");
+        let scenes = [
+            crate::scene::load_builtin("prism").unwrap(),
+            crate::scene::load_builtin("cornell-box").unwrap(),
+            crate::scene::load(&dir.join("normal-mapped.glb")).unwrap(),
+            crate::scene::load(&dir.join("textured-glass.glb")).unwrap(),
+        ];
+        for scene in &scenes {
+            let s = SpectralScene::new(scene, BinGrid::with_bins(4).unwrap());
+            let (lo, hi) = s.bounds;
+            let mut rng = Rng::stream(3, 0, 0, Purpose::Photon);
+            let (mut front, mut back) = (0, 0);
+            for _ in 0..4000 {
+                let [a, b] = rng.next_2d();
+                let o = lo + (hi - lo) * Vec3::new(a, b, rng.next_f32());
+                let Some(hit) = s.intersect(o, uniform_sphere(rng.next_2d())) else {
+                    continue;
+                };
+                assert_eq!(s.normal_code(&hit), NormalCode::from(hit.nf), "{}", s.name);
+                if hit.front {
+                    front += 1;
+                } else {
+                    back += 1;
+                }
+            }
+            assert!(front > 100 && back > 20, "{}: {front} / {back}", s.name);
+        }
+    }
 }
