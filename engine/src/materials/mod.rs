@@ -7,6 +7,8 @@ pub mod microfacet;
 
 use glam::Vec3;
 
+use crate::spectral::spd;
+
 /// Unpolarised Fresnel reflectance for light arriving with `cos_i` = cos θ (≥ 0) from a
 /// medium of index `eta_i` onto one of index `eta_t`. Returns 1 under total internal
 /// reflection; always in [0, 1].
@@ -188,7 +190,14 @@ pub fn russian_roulette_metal(
     weight: f32,
     u: f32,
 ) -> bool {
-    russian_roulette_by(t, |i| microfacet::schlick(reflectance[i], cos) * weight, u)
+    debug_assert_eq!(t.len(), reflectance.len());
+    let attenuate = |t: &mut [f32]| {
+        for (v, &r) in t.iter_mut().zip(reflectance) {
+            *v *= microfacet::schlick(r, cos) * weight;
+        }
+        spd::sum(t)
+    };
+    russian_roulette_by(t, attenuate, u)
 }
 
 /// A camera path's metal bounce: `t` *= Schlick(F0 = `reflectance`, `cos`) · `weight`
@@ -209,7 +218,7 @@ pub const FAINT: f32 = 0.25;
 /// brighter one always continues. Paths through many lossy bounces end; a bright path is
 /// never cut short.
 pub fn roulette_when_faint(t: &mut [f32], u: f32) -> bool {
-    let m = crate::spectral::spd::max(t);
+    let m = spd::max(t);
     if !(m > 0.0) {
         return false;
     }
@@ -220,22 +229,28 @@ pub fn roulette_when_faint(t: &mut [f32], u: f32) -> bool {
     if u >= p {
         return false;
     }
-    crate::spectral::spd::scale(t, 1.0 / p);
+    spd::scale(t, 1.0 / p);
     true
 }
 
 /// Russian roulette on a scalar weight (≤ 1 for the microfacet models): survives with
 /// probability min(1, w) and keeps the path's size.
 pub fn russian_roulette_scalar(t: &mut [f32], w: f32, u: f32) -> bool {
-    russian_roulette_by(t, |_| w, u)
+    let attenuate = |t: &mut [f32]| {
+        spd::scale(t, w);
+        spd::sum(t)
+    };
+    russian_roulette_by(t, attenuate, u)
 }
 
 /// Russian roulette on a reflectance: multiplies `t` by ρ, then survives with
 /// p = min(1, Σ(t·ρ)/Σt) and divides by p (unbiased; the path's weight stays near its
 /// size before the bounce). Returns false when the path is absorbed. Shared by the photon
 /// tracer and the gather, so both sides end paths the same way.
+#[inline]
 pub fn russian_roulette(t: &mut [f32], reflectance: &[f32], u: f32) -> bool {
-    russian_roulette_by(t, |i| reflectance[i], u)
+    debug_assert_eq!(t.len(), reflectance.len());
+    russian_roulette_by(t, |t| spd::mul_assign_sum(t, reflectance), u)
 }
 
 /// [`russian_roulette`] of a flux that is `v` in one bin and zero elsewhere, by that
@@ -256,14 +271,13 @@ pub fn russian_roulette_single(v: &mut f32, factor: f32, u: f32) -> bool {
     true
 }
 
-/// [`russian_roulette`] with the factor of bin i given by `factor(i)`.
+/// [`russian_roulette`] with the bins attenuated by `attenuate`, which returns their new
+/// sum (loops over the slice itself, which the compiler vectorises; an indexed factor per
+/// bin kept them scalar).
 #[inline]
-fn russian_roulette_by(t: &mut [f32], factor: impl Fn(usize) -> f32, u: f32) -> bool {
-    let before = crate::spectral::spd::sum(t);
-    for (i, v) in t.iter_mut().enumerate() {
-        *v *= factor(i);
-    }
-    let after = crate::spectral::spd::sum(t);
+fn russian_roulette_by(t: &mut [f32], attenuate: impl FnOnce(&mut [f32]) -> f32, u: f32) -> bool {
+    let before = spd::sum(t);
+    let after = attenuate(t);
     if !(before > 0.0 && after > 0.0) {
         return false;
     }
@@ -271,7 +285,7 @@ fn russian_roulette_by(t: &mut [f32], factor: impl Fn(usize) -> f32, u: f32) -> 
     if u >= p {
         return false;
     }
-    crate::spectral::spd::scale(t, 1.0 / p);
+    spd::scale(t, 1.0 / p);
     true
 }
 

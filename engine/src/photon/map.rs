@@ -132,7 +132,10 @@ impl PhotonBatch {
     /// are never stored.
     pub fn push(&mut self, grid: &BinGrid, pos: Vec3, normal: impl Into<NormalCode>, flux: &[f32]) {
         let normal = normal.into();
-        if !(spd::sum(flux) > 0.0) || !spd::all_finite(flux) {
+        // A NaN or infinity in any bin makes the sum NaN or infinite (so does a sum past
+        // f32::MAX, which no record could hold): one pass rejects all three.
+        let total = spd::sum(flux);
+        if !(total > 0.0 && total.is_finite()) {
             return;
         }
         match (self.record, grid.smits()) {
@@ -778,6 +781,38 @@ pub(crate) mod tests {
                     assert_eq!(ha.position(), hb.position());
                     assert_eq!(ha.normal(), hb.normal());
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn a_many_bin_flux_with_a_nan_an_infinity_or_an_overflowing_sum_is_dropped() {
+        for bins in [2usize, 20, 100] {
+            let grid = BinGrid::with_bins(bins).unwrap();
+            for record in [Record::Full, Record::Compact, Record::Spiked] {
+                let mut batch = PhotonBatch::new(record, &grid);
+                let good = vec![0.5f32; bins];
+                for (k, bad) in [
+                    (0, f32::NAN),
+                    (bins - 1, f32::NAN),
+                    (bins / 2, f32::INFINITY),
+                    (bins - 1, f32::NEG_INFINITY),
+                    (1, f32::MAX),
+                ] {
+                    let mut flux = good.clone();
+                    flux[k] = bad;
+                    if bad == f32::MAX {
+                        flux[0] = f32::MAX;
+                    }
+                    batch.push(&grid, Vec3::ZERO, Vec3::Y, &flux);
+                    assert_eq!(batch.len(), 0, "{bins} bins {record:?}: {bad} at {k}");
+                }
+                batch.push(&grid, Vec3::ZERO, Vec3::Y, &good);
+                assert_eq!(
+                    batch.len(),
+                    1,
+                    "{bins} bins {record:?}: a finite flux is kept"
+                );
             }
         }
     }

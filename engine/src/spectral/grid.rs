@@ -45,6 +45,9 @@ pub struct BinGrid {
     centers: Vec<f64>,
     to_xyz: Vec<[f64; 3]>,
     to_srgb: Vec<[f32; 3]>,
+    /// `to_srgb` by channel (the R weights of every bin, then G, then B): the layout
+    /// [`BinGrid::to_linear_srgb`]'s eight-lane sums read.
+    srgb_rows: [Vec<f32>; 3],
     smits: Option<SmitsBins>,
     /// How RGB colours (materials, lights, texels) become spectra on this grid.
     upsampling: Upsampling,
@@ -56,6 +59,11 @@ pub struct BinGrid {
     /// D65 normalised to Y = 1 at each of `texel_lambdas` (decoding a compact triplet).
     texel_d65: Vec<f64>,
     per_bin: usize,
+}
+
+/// Channel-major copies of per-channel sRGB weights (see `BinGrid::srgb_rows`).
+fn srgb_rows(to_srgb: &[[f32; 3]]) -> [Vec<f32>; 3] {
+    [0, 1, 2].map(|c| to_srgb.iter().map(|w| w[c]).collect())
 }
 
 /// Bins up to this wide take a texel's spectrum at their midpoint.
@@ -98,6 +106,7 @@ impl BinGrid {
             lambda_max,
             centers,
             to_xyz,
+            srgb_rows: srgb_rows(&to_srgb),
             to_srgb,
             smits: None,
             upsampling: Upsampling::default(),
@@ -159,6 +168,7 @@ impl BinGrid {
             // Nominal dominant wavelengths of the sRGB primaries, for labels only.
             centers: vec![611.0, 549.0, 464.0],
             to_xyz,
+            srgb_rows: srgb_rows(&to_srgb),
             to_srgb,
             smits: None,
             upsampling: Upsampling::default(),
@@ -444,31 +454,10 @@ impl BinGrid {
     }
 
     /// Linear sRGB of channel values (the film's conversion; may be negative out of gamut).
+    #[inline]
     pub fn to_linear_srgb(&self, v: &[f32]) -> [f32; 3] {
-        // Four interleaved partial sums per channel (independent chains the CPU overlaps);
-        // below four bins this is the plain sum.
-        let mut part = [[0.0f32; 3]; 4];
-        let chunks = self.to_srgb.chunks_exact(4).zip(v.chunks_exact(4));
-        let done = 4 * (self.to_srgb.len().min(v.len()) / 4);
-        for (w4, x4) in chunks {
-            for ((p, w), &x) in part.iter_mut().zip(w4).zip(x4) {
-                p[0] += w[0] * x;
-                p[1] += w[1] * x;
-                p[2] += w[2] * x;
-            }
-        }
-        let mut rgb = [0.0f32; 3];
-        for p in part {
-            for c in 0..3 {
-                rgb[c] += p[c];
-            }
-        }
-        for (w, &x) in self.to_srgb[done..].iter().zip(&v[done..]) {
-            rgb[0] += w[0] * x;
-            rgb[1] += w[1] * x;
-            rgb[2] += w[2] * x;
-        }
-        rgb
+        // One eight-lane dot product per channel over channel-major weights.
+        self.srgb_rows.each_ref().map(|w| spd::dot(w, v))
     }
 
     /// A short description: "100 bins, 360–830 nm" or "RGB".
@@ -487,6 +476,32 @@ impl BinGrid {
 
 /// Arithmetic on channel vectors (all slices have the grid's length).
 pub mod spd {
+    /// `a` *= `b` bin by bin, returning the new Σa: bit for bit [`mul_assign`] then
+    /// [`sum`], in one pass.
+    #[inline]
+    pub fn mul_assign_sum(a: &mut [f32], b: &[f32]) -> f32 {
+        let n = a.len().min(b.len());
+        let (a, b) = (&mut a[..n], &b[..n]);
+        let mut lanes = [0.0f32; LANES];
+        let mut chunks = a.chunks_exact_mut(LANES);
+        for (x, y) in (&mut chunks).zip(b.chunks_exact(LANES)) {
+            for ((l, x), y) in lanes.iter_mut().zip(x).zip(y) {
+                *x *= y;
+                *l += *x;
+            }
+        }
+        let mut s = 0.0f32;
+        for l in lanes {
+            s += l;
+        }
+        let done = LANES * (n / LANES);
+        for (x, y) in chunks.into_remainder().iter_mut().zip(&b[done..]) {
+            *x *= y;
+            s += *x;
+        }
+        s
+    }
+
     pub fn mul_assign(a: &mut [f32], b: &[f32]) {
         for (x, y) in a.iter_mut().zip(b) {
             *x *= y;
@@ -530,19 +545,45 @@ pub mod spd {
         s
     }
 
+    /// Σ a·b over the shorter length: eight partial sums as in [`sum`] (below eight
+    /// entries, the plain left-to-right sum).
+    #[inline]
+    pub fn dot(a: &[f32], b: &[f32]) -> f32 {
+        let n = a.len().min(b.len());
+        let (a, b) = (&a[..n], &b[..n]);
+        let mut lanes = [0.0f32; LANES];
+        for (x, y) in a.chunks_exact(LANES).zip(b.chunks_exact(LANES)) {
+            for ((l, x), y) in lanes.iter_mut().zip(x).zip(y) {
+                *l += x * y;
+            }
+        }
+        let mut s = 0.0f32;
+        for l in lanes {
+            s += l;
+        }
+        let done = LANES * (n / LANES);
+        for (x, y) in a[done..].iter().zip(&b[done..]) {
+            s += x * y;
+        }
+        s
+    }
+
     pub fn max(a: &[f32]) -> f32 {
         a.iter().copied().fold(0.0, f32::max)
     }
 
     /// Index of the only non-zero entry, if exactly one entry is non-zero.
     pub fn single_nonzero(a: &[f32]) -> Option<usize> {
-        // The first non-zero entry (a many-bin flux stops at once), then one branch-free
-        // pass over the rest.
+        // The first non-zero entry (a many-bin flux stops at once), then the rest eight
+        // entries at a time (branch-free within each eight), stopping at a second one.
         let first = a.iter().position(|&v| v != 0.0)?;
-        let others = a[first + 1..]
-            .iter()
-            .fold(0u32, |acc, &v| acc | u32::from(v != 0.0));
-        (others == 0).then_some(first)
+        let mut rest = a[first + 1..].chunks_exact(LANES);
+        for c in &mut rest {
+            if c.iter().fold(false, |any, &v| any | (v != 0.0)) {
+                return None;
+            }
+        }
+        rest.remainder().iter().all(|&v| v == 0.0).then_some(first)
     }
 
     /// No NaN or infinity (branch-free: every entry is read).

@@ -322,7 +322,34 @@ fn vector_reductions_agree_with_plain_loops_at_every_length() {
                 one[n - 1] = -1.0;
                 assert_eq!(spd::single_nonzero(&one), None, "n={n}: two entries");
             }
+            // A second entry anywhere after the first (inside an eight, across one, in
+            // the remainder) is found.
+            for j in k + 1..n.min(k + 20) {
+                let mut two = vec![0.0f32; n];
+                two[k] = 2.0;
+                two[j] = 1e-30;
+                assert_eq!(spd::single_nonzero(&two), None, "n={n}: entries {k}, {j}");
+            }
         }
+        // The fused multiply-and-sum is the two passes, bit for bit.
+        let b: Vec<f32> = (0..n).map(|i| 0.3 + (i * 13 % 7) as f32 * 0.1).collect();
+        let (mut fused, mut apart) = (a.clone(), a.clone());
+        let s = spd::mul_assign_sum(&mut fused, &b);
+        spd::mul_assign(&mut apart, &b);
+        assert_eq!(s.to_bits(), spd::sum(&apart).to_bits(), "n={n}: fused sum");
+        assert!(
+            fused
+                .iter()
+                .zip(&apart)
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        );
+        // The dot product against f64.
+        let exact: f64 = a.iter().zip(&b).map(|(&x, &y)| x as f64 * y as f64).sum();
+        let d = spd::dot(&a, &b) as f64;
+        assert!(
+            (d - exact).abs() <= 1e-6 * exact.max(1e-30),
+            "n={n}: dot {d} vs {exact}"
+        );
     }
     // The colour conversion with interleaved partial sums against a plain f64 loop.
     for bins in [1usize, 3, 4, 5, 20, 100] {
