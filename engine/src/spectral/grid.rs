@@ -585,11 +585,6 @@ pub mod spd {
         }
         rest.remainder().iter().all(|&v| v == 0.0).then_some(first)
     }
-
-    /// No NaN or infinity (branch-free: every entry is read).
-    pub fn all_finite(a: &[f32]) -> bool {
-        a.iter().fold(true, |ok, v| ok & v.is_finite())
-    }
 }
 
 #[cfg(test)]
