@@ -212,13 +212,12 @@ fn irradiance_lookups(bencher: Bencher, storage: Storage) {
         kernel.r_max,
     );
     let mut out = vec![0.0f32; 20];
-    let mut found = Vec::new();
     bencher
         .counter(ItemsCount::new(points.len()))
         .bench_local(|| {
             let mut hits = 0;
             for &(p, normal) in &points {
-                hits += usize::from(cache.lookup(&scene.grid, p, normal, &mut found, &mut out));
+                hits += usize::from(cache.lookup(&scene.grid, p, normal, &mut out));
             }
             hits
         });

@@ -206,14 +206,7 @@ impl IrradianceCache {
 
     /// The irradiance (N bins) of the nearest point on the surface and side `n` faces at
     /// `p`, into `out`; false (and `out` zero) when no point lies within the lookup radius.
-    pub fn lookup(
-        &self,
-        grid: &BinGrid,
-        p: Vec3,
-        n: Vec3,
-        found: &mut Vec<(f32, u32)>,
-        out: &mut [f32],
-    ) -> bool {
+    pub fn lookup(&self, grid: &BinGrid, p: Vec3, n: Vec3, out: &mut [f32]) -> bool {
         let test = SurfaceTest::new(&self.positions, |i| self.normals[i], p, n);
         let accept = |i: usize| test.accepts(i);
         // The point in the query's own cell, if it has one on the query's surface: within
@@ -225,9 +218,8 @@ impl IrradianceCache {
             Some(&i) if accept(i as usize) => i,
             _ => {
                 let r2 = self.r_lookup * self.r_lookup;
-                kdtree::k_nearest_within(&self.positions, &self.axes, p, 1, r2, accept, found);
-                match found.first() {
-                    Some(&(_, i)) => i,
+                match kdtree::nearest_within(&self.positions, &self.axes, p, r2, accept) {
+                    Some((_, i)) => i,
                     None => {
                         out.fill(0.0);
                         return false;
@@ -270,7 +262,7 @@ mod tests {
             let cache = IrradianceCache::build(&map, &grid, kernel, 4, 1e-6, 0.1);
             // Every 4th photon, a few merged where two fall in one cell.
             assert!((7_000..=10_000).contains(&cache.len()), "{}", cache.len());
-            let (mut found, mut out) = (Vec::new(), vec![0.0; 4]);
+            let mut out = vec![0.0; 4];
             let mut sum = 0.0;
             for i in 0..400 {
                 let p = Vec3::new(
@@ -278,7 +270,7 @@ mod tests {
                     0.3 + 0.4 * (i / 20) as f32 / 20.0,
                     0.0,
                 );
-                assert!(cache.lookup(&grid, p, Vec3::Z, &mut found, &mut out));
+                assert!(cache.lookup(&grid, p, Vec3::Z, &mut out));
                 // Luminance relative to the flat flux's: compact records keep a flux's
                 // colour, not its bins (a flat flux comes back D65-shaped).
                 sum += grid.to_xyz(&out)[1] / grid.to_xyz(&[1.0; 4])[1];
@@ -286,13 +278,7 @@ mod tests {
             let mean = sum / 400.0;
             assert!((mean / 4.0 - 1.0).abs() < 0.03, "{record:?}: {mean}");
             // The other side of the surface finds nothing.
-            assert!(!cache.lookup(
-                &grid,
-                Vec3::new(0.5, 0.5, 0.0),
-                -Vec3::Z,
-                &mut found,
-                &mut out
-            ));
+            assert!(!cache.lookup(&grid, Vec3::new(0.5, 0.5, 0.0), -Vec3::Z, &mut out));
         }
     }
 
@@ -322,15 +308,9 @@ mod tests {
         let cache = IrradianceCache::build(&map, &grid, kernel, 4, 1e-6, 0.1);
         // Cells of 0.0075: the crowd spans at most 4 × 4 of them.
         assert!(cache.len() <= 10_000 + 16, "{}", cache.len());
-        let (mut found, mut out) = (Vec::new(), vec![0.0; 4]);
+        let mut out = vec![0.0; 4];
         // The crowd's irradiance (4 + 4/0.0004 = 10 004 per unit area) is still read there.
-        assert!(cache.lookup(
-            &grid,
-            Vec3::new(0.51, 0.51, 0.0),
-            Vec3::Z,
-            &mut found,
-            &mut out
-        ));
+        assert!(cache.lookup(&grid, Vec3::new(0.51, 0.51, 0.0), Vec3::Z, &mut out));
         assert!(out[0] > 1000.0, "{}", out[0]);
     }
 }

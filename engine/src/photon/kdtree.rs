@@ -177,46 +177,33 @@ pub fn for_each_within(
     }
 }
 
-/// The `k` nearest positions within distance √`r2_max` of `p` that pass `accept`, as
-/// (distance², index) pairs in `found` (unordered; cleared first). Returns the squared
-/// search radius at the end: the k-th nearest's distance² when k were found, else
-/// `r2_max`. One traversal with a bounded max-heap, so the work grows with k and log n,
-/// not with how many photons lie inside `r2_max`.
-pub fn k_nearest_within(
+/// The nearest position within distance √`r2_max` of `p` that passes `accept`, as
+/// (distance², index), or `None`. The near side is visited first, so the radius drops to
+/// the nearest point's distance almost at once and prunes the rest of the tree; of equally
+/// near points the first visited wins.
+pub fn nearest_within(
     positions: &[[f32; 3]],
     axes: &[u8],
     p: Vec3,
-    k: usize,
     r2_max: f32,
     accept: impl Fn(usize) -> bool,
-    found: &mut Vec<(f32, u32)>,
-) -> f32 {
-    found.clear();
-    if k == 0 {
-        return r2_max;
-    }
+) -> Option<(f32, u32)> {
     let p = p.to_array();
+    let mut best = None;
     let mut r2 = r2_max;
     let mut offer = |i: usize, d2: f32, r2: &mut f32| {
         if d2 < *r2 && accept(i) {
-            if found.len() < k {
-                heap_push(found, (d2, i as u32));
-            } else {
-                heap_replace_top(found, (d2, i as u32));
-            }
-            if found.len() == k {
-                *r2 = found[0].0;
-            }
+            *r2 = d2;
+            best = Some((d2, i as u32));
         }
     };
-    let dist2 = |q: [f32; 3]| offset_dist2(p, q);
     let mut stack = [(0usize, 0usize, 0f32); 64];
     let mut sp = 0;
     let (mut lo, mut hi) = (0usize, positions.len());
     loop {
         if hi - lo > LEAF {
             let mid = (lo + hi) / 2;
-            let (d, d2) = dist2(positions[mid]);
+            let (d, d2) = offset_dist2(p, positions[mid]);
             offer(mid, d2, &mut r2);
             let delta = d[axes[mid] as usize];
             let (near, far) = if delta <= 0.0 {
@@ -231,11 +218,9 @@ pub fn k_nearest_within(
             (lo, hi) = near;
             continue;
         }
-        // The leaf's photons inside the radius as the scan starts (`offer` checks each
-        // against the radius as it shrinks).
-        scan_leaf(&positions[lo..hi], p, r2, |i, d2| {
-            offer(lo + i, d2, &mut r2)
-        });
+        for (i, q) in positions[lo..hi].iter().enumerate() {
+            offer(lo + i, offset_dist2(p, *q).1, &mut r2);
+        }
         // The next kept side the radius still reaches (it may have shrunk since).
         let mut next = None;
         while sp > 0 && next.is_none() {
@@ -250,42 +235,7 @@ pub fn k_nearest_within(
             None => break,
         }
     }
-    r2
-}
-
-/// Binary max-heap on the distance² in `h[0]`.
-fn heap_push(h: &mut Vec<(f32, u32)>, v: (f32, u32)) {
-    h.push(v);
-    let mut i = h.len() - 1;
-    while i > 0 {
-        let parent = (i - 1) / 2;
-        if h[parent].0 >= h[i].0 {
-            break;
-        }
-        h.swap(parent, i);
-        i = parent;
-    }
-}
-
-fn heap_replace_top(h: &mut [(f32, u32)], v: (f32, u32)) {
-    h[0] = v;
-    let n = h.len();
-    let mut i = 0;
-    loop {
-        let (l, r) = (2 * i + 1, 2 * i + 2);
-        let mut largest = i;
-        if l < n && h[l].0 > h[largest].0 {
-            largest = l;
-        }
-        if r < n && h[r].0 > h[largest].0 {
-            largest = r;
-        }
-        if largest == i {
-            break;
-        }
-        h.swap(i, largest);
-        i = largest;
-    }
+    best
 }
 
 /// Distance to the k-th nearest position (or to the farthest, if fewer than k).
@@ -502,39 +452,62 @@ mod tests {
         }
     }
 
+    /// The brute-force answer to [`nearest_within`]: the least distance² below `r2_max`
+    /// among accepted points, and every index at that distance.
+    fn brute_nearest(
+        pts: &[[f32; 3]],
+        p: Vec3,
+        r2_max: f32,
+        keep: impl Fn(usize) -> bool,
+    ) -> Option<(f32, Vec<u32>)> {
+        let d2s: Vec<(f32, u32)> = (0..pts.len())
+            .filter(|&i| keep(i))
+            .map(|i| ((Vec3::from_array(pts[i]) - p).length_squared(), i as u32))
+            .filter(|&(d2, _)| d2 < r2_max)
+            .collect();
+        let least = d2s.iter().map(|d| d.0).min_by(f32::total_cmp)?;
+        Some((
+            least,
+            d2s.iter().filter(|d| d.0 == least).map(|d| d.1).collect(),
+        ))
+    }
+
     #[test]
-    fn k_nearest_matches_brute_force_with_a_filter_and_a_cap() {
+    fn nearest_matches_brute_force_with_a_filter_and_a_cap() {
         let mut rng = Rng::stream(6, 0, 0, Purpose::Photon);
         let pts: Vec<[f32; 3]> = (0..20_000)
             .map(|_| [rng.next_f32(), rng.next_f32() * 0.1, rng.next_f32()])
             .collect();
         let (sorted, axes) = ordered(&pts);
-        let mut found = Vec::new();
-        for trial in 0..200 {
+        let (mut capped, mut none) = (0, 0);
+        for trial in 0..400 {
             let p = Vec3::new(rng.next_f32(), rng.next_f32() * 0.1, rng.next_f32());
-            let (k, r2_max) = (1 + trial % 60, if trial % 3 == 0 { 1e-3 } else { 1.0 });
-            // Keep every other photon (by its position's parity), as a normal test would.
-            let keep = |i: usize| ((sorted[i][0] * 1e4) as u32).is_multiple_of(2);
-            let r2 = k_nearest_within(&sorted, &axes, p, k, r2_max, keep, &mut found);
-            let mut want: Vec<f32> = (0..sorted.len())
-                .filter(|&i| keep(i))
-                .map(|i| (Vec3::from_array(sorted[i]) - p).length_squared())
-                .filter(|&d2| d2 < r2_max)
-                .collect();
-            want.sort_by(f32::total_cmp);
-            want.truncate(k);
-            let mut got: Vec<f32> = found.iter().map(|f| f.0).collect();
-            got.sort_by(f32::total_cmp);
-            assert_eq!(got, want, "trial {trial}");
-            let expect_r2 = if want.len() == k { want[k - 1] } else { r2_max };
-            assert_eq!(r2, expect_r2);
+            // Caps from far below the spacing (often nothing within) to the whole box.
+            let r2_max = [1e-4, 5e-4, 2e-3, 1.0][trial % 4];
+            // Keep about one photon in five (by its position), as a surface test would.
+            let keep = |i: usize| ((sorted[i][0] * 1e4) as u32).is_multiple_of(5);
+            let got = nearest_within(&sorted, &axes, p, r2_max, keep);
+            let want = brute_nearest(&sorted, p, r2_max, keep);
+            match (got, want) {
+                (None, None) => none += 1,
+                (Some((d2, i)), Some((least, at))) => {
+                    assert_eq!(d2, least, "trial {trial}");
+                    assert!(at.contains(&i), "trial {trial}: {i} not in {at:?}");
+                    capped += usize::from(r2_max < 1.0);
+                }
+                (got, want) => panic!("trial {trial}: {got:?} against {want:?}"),
+            }
         }
+        // Both outcomes were exercised under a cap.
+        assert!(
+            none > 20 && capped > 20,
+            "{none} empty, {capped} found under a cap"
+        );
     }
 
     #[test]
     fn every_size_around_the_leaf_size_answers_as_brute_force_does() {
         let mut rng = Rng::stream(7, 0, 0, Purpose::Photon);
-        let mut found = Vec::new();
         for n in 0..(4 * LEAF + 3) {
             let pts: Vec<[f32; 3]> = (0..n)
                 .map(|_| [rng.next_f32(), rng.next_f32(), rng.next_f32()])
@@ -551,18 +524,10 @@ mod tests {
                 seen.sort();
                 seen.dedup();
                 assert_eq!(seen.len(), brute(&pts, p, r2), "{n} points");
+                let got = nearest_within(&sorted, &axes, p, 1.0, |_| true).map(|g| g.0);
+                let want = brute_nearest(&pts, p, 1.0, |_| true).map(|w| w.0);
+                assert_eq!(got, want, "{n} points");
                 let k = 1 + n / 3;
-                k_nearest_within(&sorted, &axes, p, k, 1.0, |_| true, &mut found);
-                let mut got: Vec<f32> = found.iter().map(|f| f.0).collect();
-                got.sort_by(f32::total_cmp);
-                let mut want: Vec<f32> = pts
-                    .iter()
-                    .map(|q| (Vec3::from_array(*q) - p).length_squared())
-                    .filter(|&d2| d2 < 1.0)
-                    .collect();
-                want.sort_by(f32::total_cmp);
-                want.truncate(k);
-                assert_eq!(got, want, "{n} points, k {k}");
                 let kth = kth_nearest_distance(&sorted, &axes, p, k);
                 let mut all: Vec<f32> = pts
                     .iter()

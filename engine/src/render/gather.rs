@@ -607,7 +607,7 @@ impl Gather<'_> {
                     // paying a full search for it.
                     match self.irradiance {
                         Some(c) => {
-                            c.lookup(&self.scene.grid, p, nf, found, out);
+                            c.lookup(&self.scene.grid, p, nf, out);
                         }
                         None => {
                             let mut hint = 0.0;
