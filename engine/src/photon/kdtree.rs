@@ -90,7 +90,16 @@ fn build(items: &mut [([u32; 3], u32)], axes: &mut [u8], bounds: ([f32; 3], [f32
         2
     };
     let mid = n / 2;
-    items.select_nth_unstable_by_key(mid, |a| ((a.0[axis] as u64) << 32) | a.1 as u64);
+    // One selection per axis, so that each compares a fixed field (no indexing by a
+    // run-time axis per comparison).
+    fn key<const A: usize>(a: &([u32; 3], u32)) -> u64 {
+        ((a.0[A] as u64) << 32) | a.1 as u64
+    }
+    match axis {
+        0 => items.select_nth_unstable_by_key(mid, key::<0>),
+        1 => items.select_nth_unstable_by_key(mid, key::<1>),
+        _ => items.select_nth_unstable_by_key(mid, key::<2>),
+    };
     axes[mid] = axis as u8;
     let split = from_order_key(items[mid].0[axis]);
     let (mut left_hi, mut right_lo) = (hi, lo);
