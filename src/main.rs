@@ -14,8 +14,9 @@ use prismap::{app, scene};
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-/// `mi_option_purge_delay` in mimalloc 2's `mi_option_e` (libmimalloc-sys names the
-/// options around it, 14 `eager_commit_delay` and 16 `use_numa_nodes`, but not this one).
+/// `mi_option_purge_delay` in `mi_option_e`: 15 in mimalloc 2 and in mimalloc 3 (which
+/// libmimalloc-sys 0.1.49 builds by default); the crate names the options around it, 14
+/// `eager_commit_delay` and 16 `use_numa_nodes`, but not this one.
 const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
 
 fn main() {
