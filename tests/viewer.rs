@@ -45,6 +45,21 @@ fn wait_until(h: &mut Harness<'static, ViewerApp>, what: &str, cond: impl Fn(&Vi
     }
 }
 
+/// Waits for two passes, so that the noise estimate (odd against even passes) and its rows
+/// are on screen, then pauses (space): a pass still in flight when the render pauses then
+/// moves nothing, and the panels keep their layout between looks.
+fn pause_with_every_row_shown(h: &mut Harness<'static, ViewerApp>) {
+    wait_until(h, "two passes and a noise estimate", |a| {
+        passes(a) >= 2
+            && a.snapshot
+                .as_ref()
+                .is_some_and(|s| s.noise_psnr_db.is_some())
+    });
+    h.key_press(egui::Key::Space);
+    h.run_steps(4);
+    assert!(h.state().paused, "space pauses");
+}
+
 fn passes(app: &ViewerApp) -> u64 {
     app.snapshot
         .as_ref()
@@ -593,15 +608,7 @@ fn every_panel_is_reachable_at_800x500_and_whole_at_1920x1080() {
     let last_controls = ["Save PNG", "Freeze as A", "stop there", "process resident"];
     for (w, h, scroll) in [(800.0, 500.0, true), (1920.0, 1080.0, false)] {
         let mut harness = harness_sized("cornell-box", w, h);
-        wait_until(&mut harness, "two passes and a noise estimate", |a| {
-            passes(a) >= 2
-                && a.snapshot
-                    .as_ref()
-                    .is_some_and(|s| s.noise_psnr_db.is_some())
-        });
-        harness.key_press(egui::Key::Space);
-        harness.run_steps(4);
-        assert!(harness.state().paused, "space pauses");
+        pause_with_every_row_shown(&mut harness);
         let screen = egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(w, h));
         for label in last_controls {
             if scroll {
@@ -655,16 +662,7 @@ fn every_control_explains_itself_on_hover() {
     let mut h = harness_sized("prism", 1920.0, 1080.0);
     h.ctx
         .global_style_mut(|s| s.interaction.tooltip_delay = 0.0);
-    // Two passes, so that the noise estimate (odd against even passes) and its rows are
-    // on screen: a pass still in flight when the render pauses then moves nothing.
-    wait_until(&mut h, "two passes and a noise estimate", |a| {
-        passes(a) >= 2
-            && a.snapshot
-                .as_ref()
-                .is_some_and(|s| s.noise_psnr_db.is_some())
-    });
-    h.key_press(egui::Key::Space);
-    h.run_steps(4);
+    pause_with_every_row_shown(&mut h);
     let controls = |h: &Harness<'static, ViewerApp>| -> Vec<(String, egui::Rect)> {
         h.query_all(egui_kittest::kittest::By::new().predicate(|n| is_control(n.role())))
             .map(|n| {
