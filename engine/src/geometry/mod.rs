@@ -1,4 +1,7 @@
-//! Rays, triangles and the `obvhs` CWBVH that finds them.
+//! Rays, triangles and the `obvhs` CWBVH that finds them (or, in scenes of a few dozen
+//! triangles, a SIMD test of every triangle: [`flat`]).
+
+mod flat;
 
 use glam::{Vec3, Vec3A};
 use obvhs::{
@@ -27,9 +30,22 @@ const BACK_OFF: f32 = 2e-4;
 /// [`BACK_OFF`]); the hits' t then count from `origin - BACK_OFF·dir`.
 #[inline]
 fn backed_off_ray(origin: Vec3, dir: Vec3, t_max: f32) -> obvhs::ray::Ray {
+    let r = backed_off_flat_ray(origin, dir, t_max);
+    obvhs::ray::Ray::new(r.origin, r.direction, r.tmin, r.tmax)
+}
+
+/// [`backed_off_ray`] without the reciprocal direction (which only the BVH's box tests
+/// need): the same origin, direction and interval, so the same triangle tests.
+#[inline]
+fn backed_off_flat_ray(origin: Vec3, dir: Vec3, t_max: f32) -> flat::FlatRay {
     let dir = positive_zeros(dir);
     let start = Vec3A::from(origin) - Vec3A::from(dir) * BACK_OFF;
-    obvhs::ray::Ray::new(start, Vec3A::from(dir), BACK_OFF, t_max + BACK_OFF)
+    flat::FlatRay {
+        origin: start,
+        direction: Vec3A::from(dir),
+        tmin: BACK_OFF,
+        tmax: t_max + BACK_OFF,
+    }
 }
 
 /// `dir` with every −0.0 component made +0.0: obvhs' traversal misses everything along a
@@ -142,15 +158,23 @@ impl SurfaceHit {
     }
 }
 
-/// The scene's triangles in a compressed wide BVH (obvhs' CWBVH, medium build).
+/// Scenes of at most this many triangles are searched without a BVH, every triangle
+/// tested four at a time ([`flat::Flat`]): cheaper than the CWBVH's node tests up to about
+/// this size on this machine (BENCHMARKS.md, session 27).
+pub const FLAT_MAX_TRIANGLES: usize = 64;
+
+/// The scene's triangles in a compressed wide BVH (obvhs' CWBVH, medium build), or for
+/// scenes of at most [`FLAT_MAX_TRIANGLES`], in blocks of four tested all at once.
 pub struct Accel {
     bvh: CwBvh,
+    /// The small scene's blocks (then `bvh` is empty and `tris` in scene order).
+    flat: Option<flat::Flat>,
     /// Triangles in BVH leaf order (so leaves index them directly), with their edges and
     /// normal precomputed: `RtTriangle::intersect` is `Triangle::intersect`'s arithmetic
     /// (e1 = v0 − v1, e2 = v2 − v0, n = e1 × e2) without recomputing them per test, so the
     /// same hits to the bit.
     tris: Vec<RtTriangle>,
-    /// BVH order → scene triangle index.
+    /// BVH order → scene triangle index (the identity in a flat scene).
     ids: Vec<u32>,
     /// Scene bounds' diagonal length, for ray offsets.
     diagonal: f32,
@@ -167,8 +191,15 @@ pub trait Cutouts: Send + Sync {
 }
 
 impl Accel {
-    /// Builds the BVH. `triangles` must be non-degenerate and finite (the loader ensures it).
+    /// Builds the BVH (blocks of four for a scene of at most [`FLAT_MAX_TRIANGLES`]).
+    /// `triangles` must be non-degenerate and finite (the loader ensures it).
     pub fn new(triangles: &[[Vec3; 3]]) -> Self {
+        Self::with_flat_max(triangles, FLAT_MAX_TRIANGLES)
+    }
+
+    /// [`Self::new`] with the BVH used above `flat_max` triangles (0: always; for tests and
+    /// benchmarks comparing the two).
+    pub fn with_flat_max(triangles: &[[Vec3; 3]], flat_max: usize) -> Self {
         let input: Vec<Triangle> = triangles
             .iter()
             .map(|t| Triangle {
@@ -193,8 +224,20 @@ impl Accel {
         if input.is_empty() {
             return Self {
                 bvh: CwBvh::default(),
+                flat: None,
                 tris: Vec::new(),
                 ids: Vec::new(),
+                diagonal,
+                cutouts: None,
+            };
+        }
+        if input.len() <= flat_max {
+            let tris: Vec<RtTriangle> = input.iter().map(RtTriangle::from).collect();
+            return Self {
+                bvh: CwBvh::default(),
+                flat: Some(flat::Flat::new(&tris)),
+                tris,
+                ids: (0..input.len() as u32).collect(),
                 diagonal,
                 cutouts: None,
             };
@@ -211,6 +254,7 @@ impl Accel {
             .collect();
         Self {
             bvh,
+            flat: None,
             tris,
             ids,
             diagonal,
@@ -232,16 +276,23 @@ impl Accel {
     #[inline(always)]
     fn test(&self, r: &obvhs::ray::Ray, id: usize) -> f32 {
         let t = self.tris[id].intersect(r);
+        if t.is_finite() && self.holed_at(r.origin, r.direction, id, t) {
+            f32::INFINITY
+        } else {
+            t
+        }
+    }
+
+    /// Whether the ray from `origin` along `dir` passes through a hole of triangle `id`
+    /// (BVH order) where it hits it, at distance `t`.
+    #[inline(always)]
+    fn holed_at(&self, origin: Vec3A, dir: Vec3A, id: usize, t: f32) -> bool {
         match &self.cutouts {
-            Some((holed, cut)) if holed[id] && t.is_finite() => {
-                let p = Vec3::from(r.origin + r.direction * t);
-                if cut.passes(self.ids[id], p) {
-                    f32::INFINITY
-                } else {
-                    t
-                }
+            Some((holed, cut)) if holed[id] => {
+                let p = Vec3::from(origin + dir * t);
+                cut.passes(self.ids[id], p)
             }
-            _ => t,
+            _ => false,
         }
     }
 
@@ -254,6 +305,15 @@ impl Accel {
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
         if self.tris.is_empty() {
             return None;
+        }
+        if let Some(flat) = &self.flat {
+            let r = backed_off_flat_ray(origin, dir, t_max);
+            return flat
+                .closest(&r, |id, t| !self.holed_at(r.origin, r.direction, id, t))
+                .map(|(t, id)| Hit {
+                    t: (t - BACK_OFF).max(0.0),
+                    prim: self.ids[id],
+                });
         }
         let ray = backed_off_ray(origin, dir, t_max);
         let mut hit = RayHit::none();
@@ -275,6 +335,10 @@ impl Accel {
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
         if self.tris.is_empty() {
             return false;
+        }
+        if let Some(flat) = &self.flat {
+            let r = backed_off_flat_ray(origin, dir, t_max);
+            return flat.any(&r, |id, t| !self.holed_at(r.origin, r.direction, id, t));
         }
         let ray = backed_off_ray(origin, dir, t_max);
         !self.bvh.ray_traverse_miss(ray, |r, id| self.test(r, id))
@@ -298,6 +362,7 @@ impl Accel {
             + self.bvh.primitive_indices.len() * 4
             + self.tris.len() * std::mem::size_of::<RtTriangle>()
             + self.ids.len() * 4
+            + self.flat.as_ref().map_or(0, flat::Flat::memory_bytes)
     }
 }
 
@@ -330,13 +395,14 @@ mod tests {
                 Vec3::new(2.0, 0.0, -2.0),
             ],
         ];
-        let accel = Accel::new(&floor);
         let o = Vec3::new(0.1, 2.85, 0.2);
-        for d in [
-            -Vec3::Y,
-            Vec3::new(0.0, -1.0, 0.0),
-            Vec3::new(-0.0, -1.0, 0.0),
-        ] {
+        for (accel, d) in both(&floor).iter().flat_map(|a| {
+            [
+                (a, -Vec3::Y),
+                (a, Vec3::new(0.0, -1.0, 0.0)),
+                (a, Vec3::new(-0.0, -1.0, 0.0)),
+            ]
+        }) {
             let hit = accel.intersect(o, d, f32::INFINITY);
             assert!(
                 hit.is_some_and(|h| (h.t - 2.85).abs() < 1e-5),
@@ -356,15 +422,17 @@ mod tests {
 
     #[test]
     fn hits_and_misses() {
-        let accel = Accel::new(&quad(5.0, 1.0, Vec3::ZERO));
-        let o = Vec3::new(0.1, 0.3, 0.0);
-        let h = accel.intersect(o, Vec3::Z, f32::INFINITY).unwrap();
-        assert!((h.t - 5.0).abs() < 1e-5);
-        assert!(accel.intersect(o, -Vec3::Z, f32::INFINITY).is_none());
-        assert!(accel.occluded(o, Vec3::Z, 6.0));
-        assert!(!accel.occluded(o, Vec3::Z, 4.0));
+        for accel in both(&quad(5.0, 1.0, Vec3::ZERO)) {
+            let o = Vec3::new(0.1, 0.3, 0.0);
+            let h = accel.intersect(o, Vec3::Z, f32::INFINITY).unwrap();
+            assert!((h.t - 5.0).abs() < 1e-5);
+            assert!(accel.intersect(o, -Vec3::Z, f32::INFINITY).is_none());
+            assert!(accel.occluded(o, Vec3::Z, 6.0));
+            assert!(!accel.occluded(o, Vec3::Z, 4.0));
+        }
         let empty = Accel::new(&[]);
         assert!(empty.intersect(Vec3::ZERO, Vec3::Z, 1.0).is_none());
+        assert!(!empty.occluded(Vec3::ZERO, Vec3::Z, 1.0));
     }
 
     #[test]
@@ -372,26 +440,27 @@ mod tests {
         // Mitsuba 3's ray-offset test configurations: (offset, scale).
         for (off, scale) in [(0.0, 1.0), (1e3, 1.0), (0.0, 1e-3), (1e4, 1e3)] {
             let o = Vec3::splat(off);
-            let accel = Accel::new(&quad(0.0, scale, o));
-            let mut fails = 0;
-            for i in 0..4096 {
-                let u = (i % 64) as f32 / 64.0 - 0.5;
-                let v = (i / 64) as f32 / 64.0 - 0.5;
-                let p = o + Vec3::new(u * scale, v * scale, 0.0);
-                let dir = Vec3::new(0.3, -0.2, 1.0).normalize();
-                let q = accel.offset(p, Vec3::Z, dir);
-                if let Some(h) = accel.intersect(q, dir, f32::INFINITY)
-                    && h.t < 1e-3 * scale
-                {
-                    fails += 1;
+            for accel in both(&quad(0.0, scale, o)) {
+                let mut fails = 0;
+                for i in 0..4096 {
+                    let u = (i % 64) as f32 / 64.0 - 0.5;
+                    let v = (i / 64) as f32 / 64.0 - 0.5;
+                    let p = o + Vec3::new(u * scale, v * scale, 0.0);
+                    let dir = Vec3::new(0.3, -0.2, 1.0).normalize();
+                    let q = accel.offset(p, Vec3::Z, dir);
+                    if let Some(h) = accel.intersect(q, dir, f32::INFINITY)
+                        && h.t < 1e-3 * scale
+                    {
+                        fails += 1;
+                    }
+                    // A receiver just above is not falsely occluded.
+                    let q2 = accel.offset(p, Vec3::Z, Vec3::Z);
+                    if accel.occluded(q2, Vec3::Z, 0.5 * scale) {
+                        fails += 1;
+                    }
                 }
-                // A receiver just above is not falsely occluded.
-                let q2 = accel.offset(p, Vec3::Z, Vec3::Z);
-                if accel.occluded(q2, Vec3::Z, 0.5 * scale) {
-                    fails += 1;
-                }
+                assert_eq!(fails, 0, "offset {off} scale {scale}");
             }
-            assert_eq!(fails, 0, "offset {off} scale {scale}");
         }
     }
 
@@ -400,8 +469,10 @@ mod tests {
         // obvhs' node test culls boxes the ray leaves before t = 1e-4: a ray starting
         // 6·10⁻⁵ below a ceiling (a shadow ray from a wall's top row) went through it.
         for scale in [1e-3f32, 1.0, 1e3] {
-            let accel = Accel::new(&quad(scale, scale, Vec3::ZERO));
-            for gap in [1e-6f32, 3e-5, 6e-5, 1e-4, 3e-4, 1e-2] {
+            for (accel, gap) in both(&quad(scale, scale, Vec3::ZERO))
+                .iter()
+                .flat_map(|a| [1e-6f32, 3e-5, 6e-5, 1e-4, 3e-4, 1e-2].map(|g| (a, g)))
+            {
                 let o = Vec3::new(0.1 * scale, -0.2 * scale, scale - gap * scale);
                 let dir = Vec3::new(0.7, 0.1, 0.7).normalize();
                 let t = gap * scale / dir.z;
@@ -416,6 +487,65 @@ mod tests {
                 assert!(accel.intersect(o, -dir, f32::INFINITY).is_none());
             }
         }
+    }
+
+    #[test]
+    fn the_flat_blocks_find_what_the_bvh_finds_in_the_built_in_scenes() {
+        use crate::sampling::{Purpose, Rng, uniform_sphere};
+        for name in ["cornell-box", "prism"] {
+            let tris = crate::scene::load_builtin(name).unwrap().triangles;
+            let [bvh, flat] = both(&tris);
+            let (lo, hi) = tris.iter().flatten().fold(
+                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                |(lo, hi), v| (lo.min(*v), hi.max(*v)),
+            );
+            let mut rng = Rng::stream(3, 0, 0, Purpose::Photon);
+            // Hits found by both at the same distance to the bit; others (a ray through a
+            // shared edge, where the BVH's box test and the triangles' own tests round
+            // differently) may differ by a few ulps or in the triangle named.
+            let (mut hits, mut exact, mut occlusions_differ) = (0, 0, 0);
+            for k in 0..20_000 {
+                let u = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                let o = lo + (hi - lo) * (0.1 + 0.8 * u);
+                let d = uniform_sphere(rng.next_2d());
+                let t_max = if k % 2 == 0 {
+                    f32::INFINITY
+                } else {
+                    0.3 * (hi - lo).length()
+                };
+                match (bvh.intersect(o, d, t_max), flat.intersect(o, d, t_max)) {
+                    (Some(a), Some(b)) => {
+                        hits += 1;
+                        assert!(
+                            (a.t - b.t).abs() <= 1e-5 * a.t,
+                            "{name} ray {k}: {a:?} {b:?}"
+                        );
+                        exact += usize::from(a == b);
+                    }
+                    (None, None) => {}
+                    (a, b) => panic!("{name} ray {k}: the BVH found {a:?}, the blocks {b:?}"),
+                }
+                occlusions_differ +=
+                    usize::from(bvh.occluded(o, d, t_max) != flat.occluded(o, d, t_max));
+            }
+            assert!(hits > 5_000, "{name}: {hits} hits");
+            assert!(
+                exact * 1000 >= hits * 999,
+                "{name}: {exact} of {hits} hits the same"
+            );
+            assert!(
+                occlusions_differ <= 2,
+                "{name}: {occlusions_differ} occlusions differ"
+            );
+        }
+    }
+
+    /// The same triangles behind the CWBVH and in flat blocks.
+    fn both(tris: &[[Vec3; 3]]) -> [Accel; 2] {
+        [
+            Accel::with_flat_max(tris, 0),
+            Accel::with_flat_max(tris, usize::MAX),
+        ]
     }
 
     #[test]
