@@ -1,30 +1,42 @@
-//! Small scenes without a BVH: every triangle tested, four at a time.
+//! Small scenes without a BVH: every triangle tested, eight at a time.
 //!
 //! obvhs' CWBVH spends most of a ray in its node tests (decoding eight quantised child
 //! boxes per node): a ray through the 36-triangle Cornell box costs about 130 ns for 3
 //! nodes and 3 triangle tests, the 14-triangle prism about 60 ns for 1 node and 1 test.
-//! Testing every triangle of so small a scene in blocks of four, one SIMD lane each, costs
-//! less than those node tests (measured in BENCHMARKS.md, session 27). The arithmetic per
-//! lane is `RtTriangle::intersect`'s, operation for operation, so a lane returns the same
-//! bits as that test on the same triangle.
+//! Testing every triangle of so small a scene in blocks of eight, one SIMD lane each (two
+//! 4-lane halves on any x86-64 or other CPU, one 8-lane AVX register where the CPU has
+//! AVX, detected at run time), costs less than those node tests (measured in
+//! BENCHMARKS.md, session 27). The arithmetic per lane is `RtTriangle::intersect`'s,
+//! operation for operation (no fused multiply-add), so every lane returns the same bits as
+//! that test on the same triangle, on either path.
 
 use glam::{Vec3A, Vec4};
-use obvhs::{ray::Ray, rt_triangle::RtTriangle};
+#[cfg(test)]
+use obvhs::ray::Ray;
+use obvhs::rt_triangle::RtTriangle;
 
-/// Four triangles' `RtTriangle` fields, one lane each, by component.
+/// Lanes a block holds.
+const LANES: usize = 8;
+
+/// Eight triangles' `RtTriangle` fields, one lane each: rows v0.x, v0.y, v0.z, e1.x … ng.z.
 #[derive(Clone, Copy)]
+#[repr(C, align(32))]
 struct Block {
-    v0: [Vec4; 3],
-    e1: [Vec4; 3],
-    e2: [Vec4; 3],
-    ng: [Vec4; 3],
+    rows: [[f32; LANES]; 12],
     /// Lanes that hold a triangle (the last block may be partly empty).
     lanes: u32,
 }
 
-/// Triangles in blocks of four (in the order given).
+const V0: usize = 0;
+const E1: usize = 3;
+const E2: usize = 6;
+const NG: usize = 9;
+
+/// Triangles in blocks of eight (in the order given).
 pub(super) struct Flat {
     blocks: Vec<Block>,
+    /// Test with AVX (the CPU has it).
+    avx: bool,
 }
 
 /// A ray: origin, direction and the interval [tmin, tmax] a hit must lie in (an obvhs
@@ -37,6 +49,7 @@ pub(super) struct FlatRay {
     pub tmax: f32,
 }
 
+#[cfg(test)]
 impl From<&Ray> for FlatRay {
     fn from(r: &Ray) -> Self {
         Self {
@@ -48,11 +61,147 @@ impl From<&Ray> for FlatRay {
     }
 }
 
+/// What a block's test found: hit lanes as a bit mask, and every lane's distance.
+type Lanes = (u32, [f32; LANES]);
+
+impl Flat {
+    pub(super) fn new(tris: &[RtTriangle]) -> Self {
+        let blocks = tris
+            .chunks(LANES)
+            .map(|chunk| {
+                let mut rows = [[0.0; LANES]; 12];
+                for (i, t) in chunk.iter().enumerate() {
+                    for (base, v) in [(V0, t.v0), (E1, t.e1), (E2, t.e2), (NG, t.ng)] {
+                        for (c, x) in v.to_array().into_iter().enumerate() {
+                            rows[base + c][i] = x;
+                        }
+                    }
+                }
+                Block {
+                    rows,
+                    lanes: (1u32 << chunk.len()) - 1,
+                }
+            })
+            .collect();
+        Self {
+            blocks,
+            avx: has_avx(),
+        }
+    }
+
+    pub(super) fn memory_bytes(&self) -> usize {
+        self.blocks.len() * std::mem::size_of::<Block>()
+    }
+
+    /// The closest hit within [tmin, tmax) as (t, triangle index), skipping hits that
+    /// `keep(index, t)` refuses (cut-outs); of equally near hits the lowest index wins.
+    #[inline]
+    pub(super) fn closest(
+        &self,
+        ray: &FlatRay,
+        keep: impl Fn(usize, f32) -> bool,
+    ) -> Option<(f32, usize)> {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx {
+            // SAFETY: `avx` is set only where the CPU reports AVX.
+            return unsafe { avx::closest(&self.blocks, ray, keep) };
+        }
+        let w = Wide::new(ray);
+        closest_with(&self.blocks, ray, keep, |b| b.test(&w))
+    }
+
+    /// Whether any triangle is hit within [tmin, tmax) that `keep(index, t)` accepts.
+    #[inline]
+    pub(super) fn any(&self, ray: &FlatRay, keep: impl Fn(usize, f32) -> bool) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx {
+            // SAFETY: `avx` is set only where the CPU reports AVX.
+            return unsafe { avx::any(&self.blocks, ray, keep) };
+        }
+        let w = Wide::new(ray);
+        any_with(&self.blocks, ray, keep, |b| b.test(&w))
+    }
+}
+
+#[cfg(test)]
+impl Flat {
+    /// Every block's lanes against `ray` (on the path `self.avx` picks).
+    fn lanes_of(&self, ray: &FlatRay) -> Vec<Lanes> {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx {
+            // SAFETY: as above.
+            return unsafe { avx::lanes_of(&self.blocks, ray) };
+        }
+        let w = Wide::new(ray);
+        self.blocks.iter().map(|b| b.test(&w)).collect()
+    }
+}
+
+fn has_avx() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// The closest accepted hit over `blocks`, each tested by `test` against the ray's own
+/// tmax (so the blocks' tests do not wait on each other; the nearer-than-best comparison
+/// here is the traversal's `t < tmax`).
+#[inline(always)]
+fn closest_with(
+    blocks: &[Block],
+    ray: &FlatRay,
+    keep: impl Fn(usize, f32) -> bool,
+    test: impl Fn(&Block) -> Lanes,
+) -> Option<(f32, usize)> {
+    let mut best = ray.tmax;
+    let mut found = None;
+    for (b, block) in blocks.iter().enumerate() {
+        let (mut mask, t) = test(block);
+        while mask != 0 {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if t[i] < best && keep(LANES * b + i, t[i]) {
+                best = t[i];
+                found = Some((t[i], LANES * b + i));
+            }
+        }
+    }
+    found
+}
+
+/// Whether any accepted hit lies strictly before tmax (as obvhs' any-hit traversal
+/// counts one).
+#[inline(always)]
+fn any_with(
+    blocks: &[Block],
+    ray: &FlatRay,
+    keep: impl Fn(usize, f32) -> bool,
+    test: impl Fn(&Block) -> Lanes,
+) -> bool {
+    for (b, block) in blocks.iter().enumerate() {
+        let (mut mask, t) = test(block);
+        while mask != 0 {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if t[i] < ray.tmax && keep(LANES * b + i, t[i]) {
+                return true;
+            }
+        }
+    }
+    false
+}
+
 /// A ray's origin and direction, each component broadcast to four lanes.
 struct Wide {
     o: [Vec4; 3],
     d: [Vec4; 3],
     tmin: Vec4,
+    tmax: Vec4,
 }
 
 impl Wide {
@@ -63,121 +212,145 @@ impl Wide {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             d: [Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z)],
             tmin: Vec4::splat(ray.tmin),
+            tmax: Vec4::splat(ray.tmax),
         }
-    }
-}
-
-impl Flat {
-    pub(super) fn new(tris: &[RtTriangle]) -> Self {
-        let lane = |v: Vec3A, c: usize| v.to_array()[c];
-        let blocks = tris
-            .chunks(4)
-            .map(|chunk| {
-                let pick = |field: fn(&RtTriangle) -> Vec3A| {
-                    [0, 1, 2].map(|c| {
-                        Vec4::from_array(
-                            [0, 1, 2, 3].map(|i| chunk.get(i).map_or(0.0, |t| lane(field(t), c))),
-                        )
-                    })
-                };
-                Block {
-                    v0: pick(|t| t.v0),
-                    e1: pick(|t| t.e1),
-                    e2: pick(|t| t.e2),
-                    ng: pick(|t| t.ng),
-                    lanes: (1u32 << chunk.len()) - 1,
-                }
-            })
-            .collect();
-        Self { blocks }
-    }
-
-    pub(super) fn memory_bytes(&self) -> usize {
-        self.blocks.len() * std::mem::size_of::<Block>()
-    }
-
-    /// The closest hit within [tmin, tmax] as (t, triangle index), skipping hits that
-    /// `keep(index, t)` refuses (cut-outs); of equally near hits the lowest index wins.
-    #[inline]
-    pub(super) fn closest(
-        &self,
-        ray: &FlatRay,
-        keep: impl Fn(usize, f32) -> bool,
-    ) -> Option<(f32, usize)> {
-        let w = Wide::new(ray);
-        // Every block is tested against the ray's own tmax, not the nearest hit so far:
-        // the blocks' tests then do not wait on each other (the division's latency
-        // overlaps), and the nearer-than-best test below is the same comparison.
-        let tmax = Vec4::splat(ray.tmax);
-        let mut best = ray.tmax;
-        let mut found = None;
-        for (b, block) in self.blocks.iter().enumerate() {
-            let (mut mask, t) = block.test(&w, tmax);
-            if mask == 0 {
-                continue;
-            }
-            let t = t.to_array();
-            while mask != 0 {
-                let i = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                if t[i] < best && keep(4 * b + i, t[i]) {
-                    best = t[i];
-                    found = Some((t[i], 4 * b + i));
-                }
-            }
-        }
-        found
-    }
-
-    /// Whether any triangle is hit within [tmin, tmax] that `keep(index, t)` accepts.
-    #[inline]
-    pub(super) fn any(&self, ray: &FlatRay, keep: impl Fn(usize, f32) -> bool) -> bool {
-        let w = Wide::new(ray);
-        let tmax = Vec4::splat(ray.tmax);
-        for (b, block) in self.blocks.iter().enumerate() {
-            let (mut mask, t) = block.test(&w, tmax);
-            if mask == 0 {
-                continue;
-            }
-            let t = t.to_array();
-            while mask != 0 {
-                let i = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                // Strictly before tmax, as obvhs' any-hit traversal counts a hit.
-                if t[i] < ray.tmax && keep(4 * b + i, t[i]) {
-                    return true;
-                }
-            }
-        }
-        false
     }
 }
 
 impl Block {
-    /// `RtTriangle::intersect` in each lane: the lanes hit within [tmin, tmax] as a bit
-    /// mask, and their distances.
+    /// `RtTriangle::intersect` in each lane, as two halves of four.
     #[inline(always)]
-    fn test(&self, w: &Wide, tmax: Vec4) -> (u32, Vec4) {
+    fn test(&self, w: &Wide) -> Lanes {
+        let (lo, tlo) = self.test_half(w, 0);
+        let (hi, thi) = self.test_half(w, 4);
+        let mut t = [0.0; LANES];
+        t[..4].copy_from_slice(&tlo.to_array());
+        t[4..].copy_from_slice(&thi.to_array());
+        ((lo | hi << 4) & self.lanes, t)
+    }
+
+    /// Lanes `at..at + 4`: those hit within [tmin, tmax] as a bit mask, and their distances.
+    #[inline(always)]
+    fn test_half(&self, w: &Wide, at: usize) -> (u32, Vec4) {
+        let row = |k: usize| Vec4::from_slice(&self.rows[k][at..at + 4]);
         let [ox, oy, oz] = w.o;
         let [dx, dy, dz] = w.d;
         // c = v0 − o; r = d × c (glam's cross: each lane a·b − c·d, in this order).
-        let (cx, cy, cz) = (self.v0[0] - ox, self.v0[1] - oy, self.v0[2] - oz);
+        let (cx, cy, cz) = (row(V0) - ox, row(V0 + 1) - oy, row(V0 + 2) - oz);
         let rx = dy * cz - cy * dz;
         let ry = dz * cx - cz * dx;
         let rz = dx * cy - cx * dy;
         // Dot products as glam's: (x + y) + z.
-        let dot = |a: [Vec4; 3], b: [Vec4; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-        let inv_det = Vec4::ONE / dot(self.ng, [dx, dy, dz]);
+        let dot = |a: [Vec4; 3], b: usize| a[0] * row(b) + a[1] * row(b + 1) + a[2] * row(b + 2);
+        let inv_det = Vec4::ONE / dot([dx, dy, dz], NG);
         let r = [rx, ry, rz];
-        let u = dot(r, self.e2) * inv_det;
-        let v = dot(r, self.e1) * inv_det;
+        let u = dot(r, E2) * inv_det;
+        let v = dot(r, E1) * inv_det;
         let w_ = Vec4::ONE - u - v;
         // Valid: a non-zero 1/det and no sign bit among u, v, w (a −0.0 misses, as there).
         let signs = u.is_negative_bitmask() | v.is_negative_bitmask() | w_.is_negative_bitmask();
         let nonzero = inv_det.cmpne(Vec4::ZERO).bitmask();
-        let t = dot(self.ng, [cx, cy, cz]) * inv_det;
-        let within = (t.cmpge(w.tmin) & t.cmple(tmax)).bitmask();
-        (nonzero & !signs & within & self.lanes, t)
+        let t = dot([cx, cy, cz], NG) * inv_det;
+        let within = (t.cmpge(w.tmin) & t.cmple(w.tmax)).bitmask();
+        (nonzero & !signs & within, t)
+    }
+}
+
+/// The same test on eight lanes at once, for CPUs with AVX.
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use super::{Block, E1, E2, FlatRay, LANES, Lanes, NG, V0};
+    use std::arch::x86_64::*;
+
+    struct Wide {
+        o: [__m256; 3],
+        d: [__m256; 3],
+        tmin: __m256,
+        tmax: __m256,
+    }
+
+    #[target_feature(enable = "avx")]
+    fn wide(ray: &FlatRay) -> Wide {
+        let (o, d) = (ray.origin, ray.direction);
+        Wide {
+            o: [o.x, o.y, o.z].map(|x| _mm256_set1_ps(x)),
+            d: [d.x, d.y, d.z].map(|x| _mm256_set1_ps(x)),
+            tmin: _mm256_set1_ps(ray.tmin),
+            tmax: _mm256_set1_ps(ray.tmax),
+        }
+    }
+
+    #[target_feature(enable = "avx")]
+    #[inline]
+    fn row(b: &Block, k: usize) -> __m256 {
+        // SAFETY: a row is eight f32s at a 32-byte boundary (the block's alignment, rows
+        // being 32 bytes each).
+        unsafe { _mm256_load_ps(b.rows[k].as_ptr()) }
+    }
+
+    #[target_feature(enable = "avx")]
+    #[inline]
+    fn dot(a: [__m256; 3], b: &Block, k: usize) -> __m256 {
+        let xy = _mm256_add_ps(
+            _mm256_mul_ps(a[0], row(b, k)),
+            _mm256_mul_ps(a[1], row(b, k + 1)),
+        );
+        _mm256_add_ps(xy, _mm256_mul_ps(a[2], row(b, k + 2)))
+    }
+
+    /// [`Block::test`]'s arithmetic, the same operations in the same order.
+    #[target_feature(enable = "avx")]
+    #[inline]
+    fn test(b: &Block, w: &Wide) -> Lanes {
+        let [ox, oy, oz] = w.o;
+        let [dx, dy, dz] = w.d;
+        let cx = _mm256_sub_ps(row(b, V0), ox);
+        let cy = _mm256_sub_ps(row(b, V0 + 1), oy);
+        let cz = _mm256_sub_ps(row(b, V0 + 2), oz);
+        let rx = _mm256_sub_ps(_mm256_mul_ps(dy, cz), _mm256_mul_ps(cy, dz));
+        let ry = _mm256_sub_ps(_mm256_mul_ps(dz, cx), _mm256_mul_ps(cz, dx));
+        let rz = _mm256_sub_ps(_mm256_mul_ps(dx, cy), _mm256_mul_ps(cx, dy));
+        let one = _mm256_set1_ps(1.0);
+        let inv_det = _mm256_div_ps(one, dot([dx, dy, dz], b, NG));
+        let u = _mm256_mul_ps(dot([rx, ry, rz], b, E2), inv_det);
+        let v = _mm256_mul_ps(dot([rx, ry, rz], b, E1), inv_det);
+        let w_ = _mm256_sub_ps(_mm256_sub_ps(one, u), v);
+        let signs = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w_)) as u32;
+        let nonzero =
+            _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv_det, _mm256_setzero_ps())) as u32;
+        let t = _mm256_mul_ps(dot([cx, cy, cz], b, NG), inv_det);
+        let within = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GE_OQ>(t, w.tmin),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(t, w.tmax),
+        );
+        let within = _mm256_movemask_ps(within) as u32;
+        let mut ts = [0.0f32; LANES];
+        // SAFETY: `ts` holds eight f32s (an unaligned store).
+        unsafe { _mm256_storeu_ps(ts.as_mut_ptr(), t) };
+        (nonzero & !signs & within & b.lanes, ts)
+    }
+
+    #[target_feature(enable = "avx")]
+    pub(super) fn closest(
+        blocks: &[Block],
+        ray: &FlatRay,
+        keep: impl Fn(usize, f32) -> bool,
+    ) -> Option<(f32, usize)> {
+        let w = wide(ray);
+        super::closest_with(blocks, ray, keep, |b| test(b, &w))
+    }
+
+    #[cfg(test)]
+    #[target_feature(enable = "avx")]
+    pub(super) fn lanes_of(blocks: &[Block], ray: &FlatRay) -> Vec<Lanes> {
+        let w = wide(ray);
+        blocks.iter().map(|b| test(b, &w)).collect()
+    }
+
+    #[target_feature(enable = "avx")]
+    pub(super) fn any(blocks: &[Block], ray: &FlatRay, keep: impl Fn(usize, f32) -> bool) -> bool {
+        let w = wide(ray);
+        super::any_with(blocks, ray, keep, |b| test(b, &w))
     }
 }
 
@@ -219,8 +392,11 @@ mod tests {
                 v1: Vec3A::Y,
                 v2: Vec3A::ONE,
             }));
-            let flat = Flat::new(&tris);
-            for k in 0..4000 {
+            let mut flat = Flat::new(&tris);
+            let paths = if flat.avx { 2 } else { 1 };
+            for k in 0..4000 * paths {
+                // Both paths where the CPU has AVX: the 8-lane one, then the portable one.
+                flat.avx = flat.avx && k < 4000;
                 let o = Vec3A::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 3.0
                     - Vec3A::splat(1.5);
                 let d = Vec3A::from(uniform_sphere(rng.next_2d()));
@@ -237,18 +413,17 @@ mod tests {
                 let obvhs_ray = Ray::new(o, d, 1e-4, tmax);
                 let scalar: Vec<f32> = tris.iter().map(|t| t.intersect(&obvhs_ray)).collect();
                 let ray = FlatRay::from(&obvhs_ray);
-                let w = Wide::new(&ray);
-                for (b, block) in flat.blocks.iter().enumerate() {
-                    let (mask, t) = block.test(&w, Vec4::splat(ray.tmax));
-                    for i in 0..4 {
-                        let Some(&s) = scalar.get(4 * b + i) else {
+                for (b, (mask, t)) in flat.lanes_of(&ray).into_iter().enumerate() {
+                    for (i, ti) in t.into_iter().enumerate() {
+                        let Some(&s) = scalar.get(LANES * b + i) else {
                             assert_eq!(mask >> i & 1, 0, "an empty lane hit");
                             continue;
                         };
                         let hit = mask >> i & 1 == 1;
-                        assert_eq!(hit, s.is_finite(), "n {n} ray {k} tri {}", 4 * b + i);
+                        let at = format!("n {n} ray {k} tri {} avx {}", LANES * b + i, flat.avx);
+                        assert_eq!(hit, s.is_finite(), "{at}");
                         if hit {
-                            assert_eq!(t[i].to_bits(), s.to_bits(), "n {n} ray {k}");
+                            assert_eq!(ti.to_bits(), s.to_bits(), "{at}");
                         }
                     }
                 }
