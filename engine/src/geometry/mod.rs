@@ -540,6 +540,40 @@ mod tests {
         }
     }
 
+    /// Holes wherever x > 0.
+    struct RightHalfHoled;
+
+    impl Cutouts for RightHalfHoled {
+        fn passes(&self, _prim: u32, p: Vec3) -> bool {
+            p.x > 0.0
+        }
+    }
+
+    #[test]
+    fn rays_pass_through_cut_outs_on_either_path() {
+        // A holed quad at z = 1 (holes where x > 0) in front of a solid one at z = 2.
+        let mut tris = quad(1.0, 1.0, Vec3::ZERO);
+        tris.extend(quad(2.0, 1.0, Vec3::ZERO));
+        for mut accel in both(&tris) {
+            accel.set_cutouts(
+                &[true, true, false, false],
+                std::sync::Arc::new(RightHalfHoled),
+            );
+            for x in [-0.7f32, -0.2, 0.2, 0.7] {
+                for y in [-0.5f32, 0.4] {
+                    let o = Vec3::new(x, y, 0.0);
+                    let holed = x > 0.0;
+                    let hit = accel.intersect(o, Vec3::Z, f32::INFINITY).unwrap();
+                    let (t, prims) = if holed { (2.0, [2, 3]) } else { (1.0, [0, 1]) };
+                    assert!((hit.t - t).abs() < 1e-5, "x {x} y {y}: {hit:?}");
+                    assert!(prims.contains(&hit.prim), "x {x} y {y}: {hit:?}");
+                    assert_eq!(accel.occluded(o, Vec3::Z, 1.5), !holed, "x {x} y {y}");
+                    assert!(accel.occluded(o, Vec3::Z, 2.5), "x {x} y {y}");
+                }
+            }
+        }
+    }
+
     /// The same triangles behind the CWBVH and in flat blocks.
     fn both(tris: &[[Vec3; 3]]) -> [Accel; 2] {
         [
