@@ -499,7 +499,9 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         }
                         row("bytes per photon", format!("{:.1}", s.bytes_per_photon));
                         row("film (+ probes)", format_bytes(m.film as f64));
-                        row("BVH", format_bytes(m.bvh as f64));
+                        // A small scene's rays test every triangle (no BVH).
+                        let search = if m.bvh_skipped { "triangles (no BVH)" } else { "BVH" };
+                        row(search, format_bytes(m.bvh as f64));
                         if let Some(r) = crate::metrics::resident_bytes() {
                             row("process resident", format_bytes(r as f64));
                         }

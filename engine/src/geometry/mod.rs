@@ -262,6 +262,11 @@ impl Accel {
         }
     }
 
+    /// Whether rays search a BVH (false: the scene is small, its triangles all tested).
+    pub fn uses_bvh(&self) -> bool {
+        self.flat.is_none() && !self.tris.is_empty()
+    }
+
     /// Gives the triangles flagged in `holed` (scene order) holes where `cutouts` says.
     pub fn set_cutouts(&mut self, holed: &[bool], cutouts: std::sync::Arc<dyn Cutouts>) {
         let by_leaf: Vec<bool> = self

@@ -88,7 +88,11 @@ pub struct MemoryReport {
     /// maps until that pass starts (0 when none were); the two fit the photon budget.
     pub next_pass_maps: usize,
     pub film: usize,
+    /// The ray search's bytes: the BVH, or a small scene's triangle blocks.
     pub bvh: usize,
+    /// The scene is small enough to be searched without a BVH ([`crate::geometry::FLAT_MAX_TRIANGLES`]).
+    #[serde(skip)]
+    pub bvh_skipped: bool,
 }
 
 /// Running totals over all passes.
@@ -214,6 +218,7 @@ impl RenderSession {
         let memory = MemoryReport {
             film: film.memory_bytes(),
             bvh: scene.accel.memory_bytes(),
+            bvh_skipped: !scene.accel.uses_bvh(),
             ..Default::default()
         };
         Self {
