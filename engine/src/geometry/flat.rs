@@ -160,17 +160,13 @@ fn closest_with(
 ) -> Option<(f32, usize)> {
     let mut best = ray.tmax;
     let mut found = None;
-    for (b, block) in blocks.iter().enumerate() {
-        let (mut mask, t) = test(block);
-        while mask != 0 {
-            let i = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            if t[i] < best && keep(LANES * b + i, t[i]) {
-                best = t[i];
-                found = Some((t[i], LANES * b + i));
-            }
+    each_hit(blocks, test, |i, t| {
+        if t < best && keep(i, t) {
+            best = t;
+            found = Some((t, i));
         }
-    }
+        true
+    });
     found
 }
 
@@ -183,12 +179,23 @@ fn any_with(
     keep: impl Fn(usize, f32) -> bool,
     test: impl Fn(&Block) -> Lanes,
 ) -> bool {
+    each_hit(blocks, test, |i, t| !(t < ray.tmax && keep(i, t)))
+}
+
+/// Calls `f(triangle index, t)` for every hit lane of every block, in index order, until
+/// `f` returns false; returns whether it stopped there.
+#[inline(always)]
+fn each_hit(
+    blocks: &[Block],
+    test: impl Fn(&Block) -> Lanes,
+    mut f: impl FnMut(usize, f32) -> bool,
+) -> bool {
     for (b, block) in blocks.iter().enumerate() {
         let (mut mask, t) = test(block);
         while mask != 0 {
             let i = mask.trailing_zeros() as usize;
             mask &= mask - 1;
-            if t[i] < ray.tmax && keep(LANES * b + i, t[i]) {
+            if !f(LANES * b + i, t[i]) {
                 return true;
             }
         }
