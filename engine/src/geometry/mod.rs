@@ -159,8 +159,8 @@ impl SurfaceHit {
 }
 
 /// Scenes of at most this many triangles are searched without a BVH, every triangle
-/// tested four at a time ([`flat::Flat`]): cheaper than the CWBVH's node tests up to about
-/// this size on this machine (BENCHMARKS.md, session 27).
+/// tested eight at a time ([`flat::Flat`]): cheaper than the CWBVH's node tests up to about
+/// 100 triangles on CPUs without AVX and about 200 with it (BENCHMARKS.md, session 27).
 pub const FLAT_MAX_TRIANGLES: usize = 64;
 
 /// The scene's triangles in a compressed wide BVH (obvhs' CWBVH, medium build), or for
