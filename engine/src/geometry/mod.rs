@@ -161,10 +161,12 @@ impl SurfaceHit {
 /// Scenes of at most this many triangles are searched without a BVH, every triangle
 /// tested eight at a time ([`flat::Flat`]): cheaper than the CWBVH's node tests up to about
 /// 100 triangles on CPUs without AVX and about 200 with it (BENCHMARKS.md, session 27).
+/// One cut for every CPU, so that a scene is searched the same way (and renders the same
+/// image) on any machine.
 pub const FLAT_MAX_TRIANGLES: usize = 64;
 
 /// The scene's triangles in a compressed wide BVH (obvhs' CWBVH, medium build), or for
-/// scenes of at most [`FLAT_MAX_TRIANGLES`], in blocks of four tested all at once.
+/// scenes of at most [`FLAT_MAX_TRIANGLES`], in blocks of eight tested all at once.
 pub struct Accel {
     bvh: CwBvh,
     /// The small scene's blocks (then `bvh` is empty and `tris` in scene order).
@@ -191,7 +193,7 @@ pub trait Cutouts: Send + Sync {
 }
 
 impl Accel {
-    /// Builds the BVH (blocks of four for a scene of at most [`FLAT_MAX_TRIANGLES`]).
+    /// Builds the BVH (blocks of eight for a scene of at most [`FLAT_MAX_TRIANGLES`]).
     /// `triangles` must be non-degenerate and finite (the loader ensures it).
     pub fn new(triangles: &[[Vec3; 3]]) -> Self {
         Self::with_flat_max(triangles, FLAT_MAX_TRIANGLES)
