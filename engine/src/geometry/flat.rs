@@ -7,8 +7,9 @@
 //! 4-lane halves on any x86-64 or other CPU, one 8-lane AVX register where the CPU has
 //! AVX, detected at run time), costs less than those node tests (measured in
 //! BENCHMARKS.md, session 27). The arithmetic per lane is `RtTriangle::intersect`'s,
-//! operation for operation (no fused multiply-add), so every lane returns the same bits as
-//! that test on the same triangle, on either path.
+//! operation for operation (fused multiply-adds exactly where glam fuses them: only in its
+//! cross product, and only in a build for FMA CPUs), so every lane returns the same bits
+//! as that test on the same triangle, on either path and in either build.
 
 use glam::{Vec3A, Vec4};
 #[cfg(test)]
@@ -242,11 +243,17 @@ impl Block {
         let row = |k: usize| Vec4::from_slice(&self.rows[k][at..at + 4]);
         let [ox, oy, oz] = w.o;
         let [dx, dy, dz] = w.d;
-        // c = v0 − o; r = d × c (glam's cross: each lane a·b − c·d, in this order).
+        // c = v0 − o; r = d × c (glam's cross: each lane a·b − c·d, in this order, the
+        // second product fused into the subtraction where the build targets FMA, as glam
+        // does then).
         let (cx, cy, cz) = (row(V0) - ox, row(V0 + 1) - oy, row(V0 + 2) - oz);
-        let rx = dy * cz - cy * dz;
-        let ry = dz * cx - cz * dx;
-        let rz = dx * cy - cx * dy;
+        #[cfg(target_feature = "fma")]
+        let sub_mul = |ab: Vec4, c: Vec4, d: Vec4| (-c).mul_add(d, ab);
+        #[cfg(not(target_feature = "fma"))]
+        let sub_mul = |ab: Vec4, c: Vec4, d: Vec4| ab - c * d;
+        let rx = sub_mul(dy * cz, cy, dz);
+        let ry = sub_mul(dz * cx, cz, dx);
+        let rz = sub_mul(dx * cy, cx, dy);
         // Dot products as glam's: (x + y) + z.
         let dot = |a: [Vec4; 3], b: usize| a[0] * row(b) + a[1] * row(b + 1) + a[2] * row(b + 2);
         let inv_det = Vec4::ONE / dot([dx, dy, dz], NG);
@@ -305,6 +312,21 @@ mod avx {
         _mm256_add_ps(xy, _mm256_mul_ps(a[2], row(b, k + 2)))
     }
 
+    /// `ab − c·d` as glam's cross product computes it: fused where the build targets FMA.
+    #[target_feature(enable = "avx")]
+    #[inline]
+    fn sub_mul(ab: __m256, c: __m256, d: __m256) -> __m256 {
+        #[cfg(target_feature = "fma")]
+        {
+            // SAFETY: the whole build targets FMA (this branch exists only then).
+            unsafe { _mm256_fnmadd_ps(c, d, ab) }
+        }
+        #[cfg(not(target_feature = "fma"))]
+        {
+            _mm256_sub_ps(ab, _mm256_mul_ps(c, d))
+        }
+    }
+
     /// [`Block::test`]'s arithmetic, the same operations in the same order.
     #[target_feature(enable = "avx")]
     #[inline]
@@ -314,9 +336,9 @@ mod avx {
         let cx = _mm256_sub_ps(row(b, V0), ox);
         let cy = _mm256_sub_ps(row(b, V0 + 1), oy);
         let cz = _mm256_sub_ps(row(b, V0 + 2), oz);
-        let rx = _mm256_sub_ps(_mm256_mul_ps(dy, cz), _mm256_mul_ps(cy, dz));
-        let ry = _mm256_sub_ps(_mm256_mul_ps(dz, cx), _mm256_mul_ps(cz, dx));
-        let rz = _mm256_sub_ps(_mm256_mul_ps(dx, cy), _mm256_mul_ps(cx, dy));
+        let rx = sub_mul(_mm256_mul_ps(dy, cz), cy, dz);
+        let ry = sub_mul(_mm256_mul_ps(dz, cx), cz, dx);
+        let rz = sub_mul(_mm256_mul_ps(dx, cy), cx, dy);
         let one = _mm256_set1_ps(1.0);
         let inv_det = _mm256_div_ps(one, dot([dx, dy, dz], b, NG));
         let u = _mm256_mul_ps(dot([rx, ry, rz], b, E2), inv_det);
