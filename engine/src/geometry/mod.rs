@@ -169,7 +169,8 @@ pub const FLAT_MAX_TRIANGLES: usize = 64;
 /// scenes of at most [`FLAT_MAX_TRIANGLES`], in blocks of eight tested all at once.
 pub struct Accel {
     bvh: CwBvh,
-    /// The small scene's blocks (then `bvh` is empty and `tris` in scene order).
+    /// The small scene's blocks (then `bvh` and `tris` are empty: the blocks hold the
+    /// triangles, in scene order).
     flat: Option<flat::Flat>,
     /// Triangles in BVH leaf order (so leaves index them directly), with their edges and
     /// normal precomputed: `RtTriangle::intersect` is `Triangle::intersect`'s arithmetic
@@ -238,7 +239,7 @@ impl Accel {
             return Self {
                 bvh: CwBvh::default(),
                 flat: Some(flat::Flat::new(&tris)),
-                tris,
+                tris: Vec::new(),
                 ids: (0..input.len() as u32).collect(),
                 diagonal,
                 cutouts: None,
@@ -266,7 +267,7 @@ impl Accel {
 
     /// Whether rays search a BVH (false: the scene is small, its triangles all tested).
     pub fn uses_bvh(&self) -> bool {
-        self.flat.is_none() && !self.tris.is_empty()
+        self.flat.is_none() && !self.ids.is_empty()
     }
 
     /// Gives the triangles flagged in `holed` (scene order) holes where `cutouts` says.
@@ -310,7 +311,7 @@ impl Accel {
     /// Closest hit with t in (0, `t_max`).
     #[inline]
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
-        if self.tris.is_empty() {
+        if self.ids.is_empty() {
             return None;
         }
         if let Some(flat) = &self.flat {
@@ -340,7 +341,7 @@ impl Accel {
     /// Whether anything lies between `origin` and `origin + dir·t_max`.
     #[inline]
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        if self.tris.is_empty() {
+        if self.ids.is_empty() {
             return false;
         }
         if let Some(flat) = &self.flat {
