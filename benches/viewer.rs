@@ -1,6 +1,8 @@
 //! Viewer responsiveness while rendering (issue #3): run with
 //! `cargo bench --bench viewer` (PRISMAP_BENCH_SECONDS sets the length, default 30;
-//! PRISMAP_BENCH_PHOTONS, _FG, _SAMPLES, _CAUSTIC_FACTOR, _BINS, _WIDTH and _HEIGHT the render settings).
+//! PRISMAP_BENCH_PHOTONS, _FG, _SAMPLES, _CAUSTIC_FACTOR, _BINS, _WIDTH and _HEIGHT the render settings;
+//! without _BINS the bins are the viewer's own "auto" choice for the scene, as `prismap view`
+//! runs it: 100 for the prism's dispersive glass).
 //!
 //! Drives the real `ViewerApp` headless through egui_kittest at ~60 Hz on the prism at
 //! 512×512 and prints: UI frame time (CPU time to build the frame; GPU painting is not
@@ -32,6 +34,9 @@ fn main() {
             .unwrap_or(default)
     };
     let defaults = RenderSettings::default();
+    let bins: Option<usize> = std::env::var("PRISMAP_BENCH_BINS")
+        .ok()
+        .and_then(|s| s.parse().ok());
     let settings = RenderSettings {
         width: env("PRISMAP_BENCH_WIDTH", 512) as u32,
         height: env("PRISMAP_BENCH_HEIGHT", 512) as u32,
@@ -42,12 +47,16 @@ fn main() {
         final_gather_rays: env("PRISMAP_BENCH_FG", defaults.final_gather_rays as usize) as u32,
         camera_samples: env("PRISMAP_BENCH_SAMPLES", defaults.camera_samples as usize) as u32,
         caustic_factor: env("PRISMAP_BENCH_CAUSTIC_FACTOR", defaults.caustic_factor),
-        bins: env("PRISMAP_BENCH_BINS", defaults.bins),
+        bins: bins.unwrap_or(defaults.bins),
         storage: Storage::Compact,
         ..defaults
     };
     let ctx = egui::Context::default();
-    let app = ViewerApp::new(&ctx, SceneSource::Builtin("prism".into()), settings, None);
+    let mut app = ViewerApp::new(&ctx, SceneSource::Builtin("prism".into()), settings, None);
+    if bins.is_none() {
+        // The viewer's "auto" bins, as `prismap view` starts with them.
+        app.keep_auto_bins();
+    }
     let mut h = Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
         .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app);
