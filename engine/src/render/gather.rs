@@ -481,7 +481,6 @@ impl Gather<'_> {
         s: &mut Scratch,
     ) {
         if self.final_gather_rays == 0 {
-            s.acc.fill(0.0);
             // Direct visualisation of the global map: all light in one estimate.
             self.density(
                 self.global,
@@ -498,8 +497,9 @@ impl Gather<'_> {
         let scene = self.scene;
         let [u, v] = r2(fg.light_index, fg.light_offset);
         let u_light = [rng.next_f32(), u, v];
-        // Written straight into the sum (it overwrites every bin): the same bits as adding
-        // it to zeros, two passes over the bins fewer.
+        // Written straight into the sum, which it overwrites bin by bin (as `density` above
+        // clears it first): the values of adding it to zeros, without two passes over the
+        // bins (only a zero's sign could differ).
         (scene.lights).direct(&scene.tris, &scene.accel, p, nf, ns, u_light, &mut s.acc);
         // Caustics from the caustic map (irradiance, like the other two terms).
         if let Some(cm) = self.caustic {
