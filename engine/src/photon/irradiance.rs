@@ -207,6 +207,22 @@ impl IrradianceCache {
     /// The irradiance (N bins) of the nearest point on the surface and side `n` faces at
     /// `p`, into `out`; false (and `out` zero) when no point lies within the lookup radius.
     pub fn lookup(&self, grid: &BinGrid, p: Vec3, n: Vec3, out: &mut [f32]) -> bool {
+        match self.nearest(p, n) {
+            Some(i) => {
+                self.value_into(grid, i, out);
+                true
+            }
+            None => {
+                out.fill(0.0);
+                false
+            }
+        }
+    }
+
+    /// The nearest point on the surface and side `n` faces at `p`, within the lookup
+    /// radius (the point [`Self::lookup`] reads).
+    #[inline]
+    pub fn nearest(&self, p: Vec3, n: Vec3) -> Option<usize> {
         let test = SurfaceTest::new(&self.positions, |i| self.normals[i], p, n);
         let accept = |i: usize| test.accepts(i);
         // The point in the query's own cell, if it has one on the query's surface: within
@@ -214,20 +230,26 @@ impl IrradianceCache {
         // hash probe instead of a tree search for most rays). Else one nearest-neighbour
         // search out to the cap: it visits the near side first, so its radius drops to the
         // nearest point's distance almost at once.
-        let i = match self.cells.get(&cell_key(p, n, self.inv_cell)) {
-            Some(&i) if accept(i as usize) => i,
+        match self.cells.get(&cell_key(p, n, self.inv_cell)) {
+            Some(&i) if accept(i as usize) => Some(i as usize),
             _ => {
                 let r2 = self.r_lookup * self.r_lookup;
-                match kdtree::nearest_within(&self.positions, &self.axes, p, r2, accept) {
-                    Some((_, i)) => i,
-                    None => {
-                        out.fill(0.0);
-                        return false;
-                    }
-                }
+                kdtree::nearest_within(&self.positions, &self.axes, p, r2, accept)
+                    .map(|(_, i)| i as usize)
             }
-        };
-        let v = &self.values[i as usize * self.stride..(i as usize + 1) * self.stride];
+        }
+    }
+
+    /// Point `i`'s irradiance as N floats, when the cache keeps it so (else None: see
+    /// [`Self::value_into`]).
+    #[inline]
+    pub fn value(&self, i: usize) -> Option<&[f32]> {
+        (self.record == Record::Full).then(|| &self.values[i * self.stride..(i + 1) * self.stride])
+    }
+
+    /// Point `i`'s irradiance (N bins) into `out`.
+    pub fn value_into(&self, grid: &BinGrid, i: usize, out: &mut [f32]) {
+        let v = &self.values[i * self.stride..(i + 1) * self.stride];
         match (self.record, grid.smits()) {
             (Record::Compact, Some(_)) => {
                 out.fill(0.0);
@@ -236,7 +258,6 @@ impl IrradianceCache {
             // Every bin overwritten: no clearing first.
             _ => out.copy_from_slice(v),
         }
-        true
     }
 }
 

@@ -228,8 +228,9 @@ impl Gather<'_> {
     ) {
         debug_assert!(pixels.len() <= 4);
         if self.pool_gather {
+            // The pixels' sums need no clearing: a pixel's first diffuse sample writes them
+            // (see `shade_diffuse`), and a pixel with none is not read.
             s.pixels = [PixelPool::default(); 4];
-            s.pool.fill(0.0);
             s.footprint = 2.0 * self.tan_half_fov / size.1 as f32;
         }
         let each = pixels.iter().zip(rngs.iter_mut().zip(outs.iter_mut()));
@@ -249,15 +250,22 @@ impl Gather<'_> {
         let samples = self.camera_samples.max(1);
         // A pixel whose rays brought back a NaN or infinity keeps it to itself (the film
         // drops that one sample) rather than spreading it over the block.
+        // (Only pixels with a diffuse sample have sums: the others' slots hold another
+        // block's.)
         let mut finite = [false; 4];
         for (k, f) in finite.iter_mut().enumerate().take(count) {
-            *f = s.pool[3 * n * k + n..3 * n * k + 2 * n]
-                .iter()
-                .all(|v| v.is_finite());
+            *f = s.pixels[k].hits > 0
+                && s.pool[3 * n * k + n..3 * n * k + 2 * n]
+                    .iter()
+                    .all(|v| v.is_finite());
         }
         let pooled = |px: &PixelPool| px.uniform && px.hits == samples && px.rays > 0;
         for (slot, out) in outs.iter_mut().enumerate().take(count) {
             let me = s.pixels[slot];
+            if me.hits == 0 {
+                // No sample reached a diffuse surface: no final-gather light.
+                continue;
+            }
             let sums = &s.pool[3 * n * slot..3 * n * (slot + 1)];
             let (w, rest) = sums.split_at(n);
             let wl = &rest[n..];
@@ -522,6 +530,7 @@ impl Gather<'_> {
                 reach: self.pool_reach * s.path_len * s.footprint * s.stretch,
             };
             let px = &mut s.pixels[slot];
+            let first_sample = px.hits == 0;
             match px.first {
                 None => {
                     px.first = Some(hit);
@@ -540,11 +549,22 @@ impl Gather<'_> {
                 .iter_mut()
                 .zip(l_sum.iter_mut())
                 .zip(wl_sum.iter_mut());
-            for (((t, r), l), ((ws, ls), wls)) in terms.zip(sums) {
-                let w = t * r * inv_pi;
-                *ws += w;
-                *ls += l;
-                *wls += w * l;
+            // The pixel's first diffuse sample starts its sums (what adding to zeros
+            // gives; a block does not clear them), the others add to them.
+            if first_sample {
+                for (((t, r), l), ((ws, ls), wls)) in terms.zip(sums) {
+                    let w = t * r * inv_pi;
+                    *ws = w;
+                    *ls = *l;
+                    *wls = w * l;
+                }
+            } else {
+                for (((t, r), l), ((ws, ls), wls)) in terms.zip(sums) {
+                    let w = t * r * inv_pi;
+                    *ws += w;
+                    *ls += l;
+                    *wls += w * l;
+                }
             }
             return;
         }
@@ -575,15 +595,22 @@ impl Gather<'_> {
             if ns != nf && !(dir.dot(nf) > 0.0) {
                 continue;
             }
-            self.final_gather_ray(self.scene.accel.offset(p, nf, dir), dir, rng, &mut s.ray);
-            spd::add_scaled(&mut s.fg, &s.ray.out, 1.0);
+            let origin = self.scene.accel.offset(p, nf, dir);
+            self.final_gather_ray(origin, dir, rng, &mut s.ray, &mut s.fg);
         }
     }
 
     /// Radiance along a final-gather ray from the global map at its first diffuse hit
-    /// (through mirrors and glass). Emitters are not counted: direct light and caustics
-    /// have their own estimates.
-    fn final_gather_ray(&self, mut origin: Vec3, mut dir: Vec3, rng: &mut Rng, b: &mut RayBuffers) {
+    /// (through mirrors and glass), added to `acc`. Emitters are not counted: direct light
+    /// and caustics have their own estimates.
+    fn final_gather_ray(
+        &self,
+        mut origin: Vec3,
+        mut dir: Vec3,
+        rng: &mut Rng,
+        b: &mut RayBuffers,
+        acc: &mut [f32],
+    ) {
         let scene = self.scene;
         let RayBuffers {
             t,
@@ -591,7 +618,6 @@ impl Gather<'_> {
             found,
             texel,
         } = b;
-        out.fill(0.0);
         t.fill(1.0);
         let mut lambda_u = None;
         for _ in 0..self.max_bounces {
@@ -606,22 +632,35 @@ impl Gather<'_> {
                     // No cache point within the search cap means (almost surely) fewer than
                     // a handful of photons there: the irradiance is taken as 0 rather than
                     // paying a full search for it.
-                    match self.irradiance {
-                        Some(c) => {
-                            c.lookup(&self.scene.grid, p, nf, out);
-                        }
+                    // The irradiance E: a cached point's own N floats where the cache
+                    // keeps them (no copy), else decoded or estimated into `out`.
+                    let e: &[f32] = match self.irradiance {
+                        Some(c) => match c.nearest(p, nf) {
+                            None => return,
+                            Some(i) => match c.value(i) {
+                                Some(v) => v,
+                                None => {
+                                    c.value_into(&self.scene.grid, i, out);
+                                    out
+                                }
+                            },
+                        },
                         None => {
                             let mut hint = 0.0;
                             let kernel = self.global_kernel;
                             self.density(self.global, p, nf, kernel, &mut hint, found, out);
+                            out
                         }
-                    }
+                    };
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
-                    // ρ E / π times the ray's throughput, in one pass over the bins.
-                    debug_assert_eq!(reflectance.len(), out.len());
+                    // ρ E / π times the ray's throughput, added to the sum in one pass
+                    // over the bins.
+                    debug_assert_eq!(reflectance.len(), e.len());
+                    debug_assert_eq!(acc.len(), e.len());
                     let inv_pi = std::f32::consts::FRAC_1_PI;
-                    for (o, (r, t)) in out.iter_mut().zip(reflectance.iter().zip(t.iter())) {
-                        *o = *o * r * t * inv_pi;
+                    let terms = e.iter().zip(reflectance.iter().zip(t.iter()));
+                    for (a, (e, (r, t))) in acc.iter_mut().zip(terms) {
+                        *a += *e * r * t * inv_pi;
                     }
                     return;
                 }
@@ -960,6 +999,62 @@ mod tests {
                 .chain(&outs[3])
                 .all(|v| v.is_finite())
         );
+    }
+
+    #[test]
+    fn a_pixel_without_a_diffuse_sample_reads_no_sums_left_by_another_block() {
+        // The block's sums are not cleared between blocks: pixels 1 and 3 saw no diffuse
+        // surface, so their slots still hold another block's values (NaN here); pixel 0
+        // pools with pixel 2 only, and 1 and 3 get no final-gather light.
+        use crate::scene::load_builtin;
+        use crate::spectral::BinGrid;
+        let grid = BinGrid::with_bins(2).unwrap();
+        let scene = SpectralScene::new(&load_builtin("cornell-box").unwrap(), grid);
+        let empty = PhotonMap::build(crate::photon::PhotonBatch::new(
+            crate::photon::record::Record::Full,
+            &scene.grid,
+        ));
+        let gather = Gather {
+            final_gather_rays: 2,
+            pool_gather: true,
+            camera_samples: 2,
+            ..test_gather(&scene, &empty, None, Kernel::adaptive(8, 1.0, 1.0, 1.0))
+        };
+        let mut s = Scratch::new(2);
+        let seen = |x: f32| PixelPool {
+            first: Some(PoolHit {
+                p: Vec3::new(x, 0.0, 0.0),
+                nf: Vec3::Z,
+                reach: 1.0,
+            }),
+            hits: 2,
+            uniform: true,
+            rays: 2,
+        };
+        s.pixels = [
+            seen(0.0),
+            PixelPool::default(),
+            seen(0.2),
+            PixelPool::default(),
+        ];
+        let stale = [f32::NAN; 6];
+        let sums: [[f32; 6]; 4] = [
+            [1.0, 1.0, 2.0, 2.0, 2.0, 2.0],
+            stale,
+            [1.0, 1.0, 4.0, 4.0, 4.0, 4.0],
+            stale,
+        ];
+        s.pool = sums.concat();
+        let mut outs = vec![vec![0.0f32; 2]; 4];
+        gather.resolve_shared(4, &mut s, &mut outs);
+        let pi = std::f32::consts::PI;
+        // Σw ⊙ π (ΣL₀ + ΣL₂) / (4 rays · 2 samples).
+        let e = pi * 6.0 / 8.0;
+        for o in &outs[0] {
+            assert!((o - e).abs() < 1e-5 * e, "{:?}", outs[0]);
+        }
+        assert_eq!(outs[1], vec![0.0, 0.0]);
+        assert_eq!(outs[3], vec![0.0, 0.0]);
     }
 
     #[test]
