@@ -157,6 +157,9 @@ pub struct RenderSession {
     /// How far, in caustic radii, a pixel's samples share its caustic estimate (see
     /// [`Gather::caustic_reuse`]); 0 in tests that compare against unshared estimates.
     caustic_reuse: f32,
+    /// Whether the gather runs its AVX copy ([`Gather::avx`]): where the CPU has AVX;
+    /// off in the test that compares the two.
+    avx: bool,
 }
 
 /// The global map's search cap, in typical radii and as a fraction of the scene diagonal
@@ -238,6 +241,7 @@ impl RenderSession {
             emitter_pixels: std::sync::OnceLock::new(),
             guides: std::sync::OnceLock::new(),
             caustic_reuse: super::gather::CAUSTIC_REUSE,
+            avx: Gather::avx_available(),
         }
     }
 
@@ -402,6 +406,7 @@ impl RenderSession {
             max_bounces: self.settings.max_bounces,
             caustic_reuse: self.caustic_reuse,
             tan_half_fov: super::gather::camera_tan_half_fov(&self.scene.camera),
+            avx: self.avx,
         };
         let next_factor = next_radius_sq_factor(self.radius_sq_factor, pass, self.settings.alpha);
         let (gathered, next) = if trace_next {
@@ -900,6 +905,65 @@ mod tests {
             f > 0.5 * expected && f < 2.0 * expected,
             "{f} vs {expected}"
         );
+    }
+
+    #[test]
+    fn the_gathers_avx_copy_renders_what_the_portable_one_does_to_the_bit() {
+        // The prism at 100 bins (caustic map, irradiance cache, pooled rays, glass seen
+        // directly), unpooled, and the Cornell box with the global map shown directly, and
+        // Blender's textured glass: every pixel of every pass the same bits either way.
+        if !Gather::avx_available() {
+            eprintln!("this CPU has no AVX: only the portable copy runs");
+            return;
+        }
+        let blender = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../scenes/blender/textured-glass.glb");
+        let cases = [
+            (crate::scene::load_builtin("prism").unwrap(), 100, 4, true),
+            (crate::scene::load_builtin("prism").unwrap(), 20, 4, false),
+            (
+                crate::scene::load_builtin("cornell-box").unwrap(),
+                20,
+                0,
+                true,
+            ),
+            (crate::scene::load(&blender).unwrap(), 20, 4, true),
+        ];
+        for (scene, bins, fg, pool) in cases {
+            let settings = RenderSettings {
+                width: 64,
+                height: 48,
+                bins,
+                final_gather_rays: fg,
+                pool_gather: pool,
+                photons_per_pass: 5_000,
+                ..RenderSettings::default()
+            };
+            let render = |avx: bool| {
+                let mut session = RenderSession::new(&scene, settings.clone()).unwrap();
+                session.avx = avx;
+                session.keep_spectra(true);
+                let mut passes = Vec::new();
+                for _ in 0..3 {
+                    session.run_pass().unwrap();
+                    // Every bin of every pixel, and the image developed from them.
+                    let spectra = session.spectral_film().unwrap().develop();
+                    let image = session.image();
+                    let values = spectra
+                        .into_iter()
+                        .chain(image.pixels.into_iter().flatten());
+                    passes.push(values.map(f32::to_bits).collect::<Vec<u32>>());
+                }
+                passes
+            };
+            let (avx, portable) = (render(true), render(false));
+            let what = format!("{} bins, {fg} rays, pooled {pool}", settings.bins);
+            assert!(
+                portable[2].iter().any(|&b| f32::from_bits(b) > 0.0),
+                "{what}: black"
+            );
+            assert!(avx == portable, "{what}: the copies differ");
+        }
     }
 
     #[test]
