@@ -910,8 +910,8 @@ mod tests {
     #[test]
     fn the_gathers_avx_copy_renders_what_the_portable_one_does_to_the_bit() {
         // The prism at 100 bins (caustic map, irradiance cache, pooled rays, glass seen
-        // directly), unpooled, and the Cornell box with the global map shown directly, and
-        // Blender's textured glass: every pixel of every pass the same bits either way.
+        // directly), unpooled, and the Cornell box (also with the global map shown
+        // directly), and Blender's textured glass: every pixel of every pass the same bits either way.
         if !Gather::avx_available() {
             eprintln!("this CPU has no AVX: only the portable copy runs");
             return;
