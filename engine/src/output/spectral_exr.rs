@@ -73,22 +73,20 @@ pub fn write_spectral_exr(
             FlatSamples::F32(samples),
         ));
     }
+    // The layout's two attributes, one in each of the header's two maps: a map writes its
+    // entries in a per-process random order, so two in one map would make the same render
+    // a different file each run.
+    let text = |v: &str| AttributeValue::Text(Text::from(v));
+    let mut layer_attributes = LayerAttributes::default();
+    (layer_attributes.other).insert(Text::from("emissiveUnits"), text("W.m^-2.sr^-1"));
     let layer = Layer::new(
         (w, h),
-        LayerAttributes::default(),
+        layer_attributes,
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels.into()),
     );
     let mut image = Image::from_layer(layer);
-    for (key, value) in [
-        ("spectralLayoutVersion", "1.0"),
-        ("emissiveUnits", "W.m^-2.sr^-1"),
-    ] {
-        image
-            .attributes
-            .other
-            .insert(Text::from(key), AttributeValue::Text(Text::from(value)));
-    }
+    (image.attributes.other).insert(Text::from("spectralLayoutVersion"), text("1.0"));
     write_atomic(path, |tmp| {
         image.write().to_file(tmp).map_err(|e| e.to_string())
     })
@@ -196,8 +194,33 @@ mod tests {
         let path =
             std::env::temp_dir().join(format!("prismap-spectral-{}.exr", std::process::id()));
         write_spectral_exr(&path, &spectra, &rgb).unwrap();
+        // The same image makes the same file, every time (its header included).
+        let bytes = std::fs::read(&path).unwrap();
+        for _ in 0..8 {
+            write_spectral_exr(&path, &spectra, &rgb).unwrap();
+            assert!(std::fs::read(&path).unwrap() == bytes, "another file");
+        }
         let (back, back_rgb) = read_spectral_exr(&path).unwrap();
+        let header = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_file(&path)
+            .unwrap();
         std::fs::remove_file(&path).unwrap();
+        // (A reader may file a single layer's attributes under the image or the layer.)
+        let attribute = |key: &str| {
+            let key = Text::from(key);
+            let image_attr = header.attributes.other.get(&key);
+            image_attr
+                .or(header.layer_data.attributes.other.get(&key))
+                .cloned()
+        };
+        let text = |v: &str| Some(AttributeValue::Text(Text::from(v)));
+        assert_eq!(attribute("spectralLayoutVersion"), text("1.0"));
+        assert_eq!(attribute("emissiveUnits"), text("W.m^-2.sr^-1"));
         assert_eq!(back.values, spectra.values);
         for (a, b) in back.wavelengths.iter().zip(&spectra.wavelengths) {
             assert!((a - b).abs() < 1e-6, "{a} vs {b}");
