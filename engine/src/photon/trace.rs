@@ -135,16 +135,16 @@ pub fn trace_photons(
             let start = c * CHUNK;
             let end = (start + CHUNK).min(caustic_photons);
             let mut scratch = TraceScratch::default();
-            for i in start..end {
-                let mut rng = Rng::stream(seed, pass, i as u64, Purpose::Photon);
-                let maps = (&mut global, &mut caustics);
-                let role = if i < settings.photons {
-                    global_role
-                } else {
-                    caustic_role
-                };
-                splits += trace_one(scene, settings, caustic, role, &mut rng, maps, &mut scratch);
-            }
+            let chunk = Chunk {
+                scene,
+                settings,
+                caustic,
+                roles: [global_role, caustic_role],
+                seed,
+                pass,
+            };
+            let maps = (&mut global, &mut caustics);
+            splits += chunk.trace(start..end, maps, &mut scratch);
             let bytes = global.memory_bytes() + caustics.memory_bytes();
             if used.fetch_add(bytes, Ordering::Relaxed) + bytes > settings.max_map_bytes {
                 over.store(true, Ordering::Relaxed);
@@ -199,7 +199,67 @@ struct TraceScratch {
     scaled: Vec<f32>,
 }
 
+/// What a chunk of photons is traced with.
+struct Chunk<'a> {
+    scene: &'a SpectralScene,
+    settings: &'a PhotonSettings,
+    caustic: bool,
+    /// The global photons' role, then the caustic-only photons'.
+    roles: [Role; 2],
+    seed: u64,
+    pass: u64,
+}
+
+impl Chunk<'_> {
+    /// Traces photons `ids` into `maps`; returns their dispersive splits. On a CPU with
+    /// AVX this runs a copy compiled for it (the same operations in the same order, so the
+    /// same photons to the bit; see [`crate::render::gather::Gather::block`]).
+    fn trace(
+        &self,
+        ids: std::ops::Range<usize>,
+        maps: (&mut PhotonBatch, &mut PhotonBatch),
+        scratch: &mut TraceScratch,
+    ) -> u64 {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx") {
+            // SAFETY: the CPU has AVX (checked just above).
+            return unsafe { self.trace_avx(ids, maps, scratch) };
+        }
+        self.trace_in(ids, maps, scratch)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn trace_avx(
+        &self,
+        ids: std::ops::Range<usize>,
+        maps: (&mut PhotonBatch, &mut PhotonBatch),
+        scratch: &mut TraceScratch,
+    ) -> u64 {
+        self.trace_in(ids, maps, scratch)
+    }
+
+    #[inline(always)]
+    fn trace_in(
+        &self,
+        ids: std::ops::Range<usize>,
+        (global, caustics): (&mut PhotonBatch, &mut PhotonBatch),
+        scratch: &mut TraceScratch,
+    ) -> u64 {
+        let mut splits = 0;
+        for i in ids {
+            let mut rng = Rng::stream(self.seed, self.pass, i as u64, Purpose::Photon);
+            let role = self.roles[usize::from(i >= self.settings.photons)];
+            let maps = (&mut *global, &mut *caustics);
+            let (scene, settings) = (self.scene, self.settings);
+            splits += trace_one(scene, settings, self.caustic, role, &mut rng, maps, scratch);
+        }
+        splits
+    }
+}
+
 /// Emits and traces one photon; returns the number of dispersive splits.
+#[inline(always)]
 fn trace_one(
     scene: &SpectralScene,
     settings: &PhotonSettings,
@@ -420,6 +480,62 @@ fn split_dispersive_with(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_tracers_avx_copy_stores_what_the_portable_one_does_to_the_bit() {
+        // The prism at 100 bins (dispersive splits, caustic photons), compact, and the
+        // Cornell box at 20 bins, full: the same photons, records and splits either way.
+        if !std::is_x86_feature_detected!("avx") {
+            eprintln!("this CPU has no AVX: only the portable copy runs");
+            return;
+        }
+        for (name, bins, record) in [
+            ("prism", 100, Record::Compact),
+            ("cornell-box", 20, Record::Full),
+        ] {
+            let scene = crate::scene::load_builtin(name).unwrap();
+            let scene =
+                SpectralScene::new(&scene, crate::spectral::BinGrid::with_bins(bins).unwrap());
+            let settings = PhotonSettings {
+                photons: 2_000,
+                record,
+                max_bounces: 1024,
+                dispersion_split: 4,
+                caustic_map: true,
+                caustic_factor: 4,
+                max_map_bytes: usize::MAX,
+            };
+            let role = |global: bool| Role {
+                global,
+                emitted_among: 2_000,
+                caustic_scale: 0.25,
+            };
+            let chunk = Chunk {
+                scene: &scene,
+                settings: &settings,
+                caustic: scene.has_specular,
+                roles: [role(true), role(false)],
+                seed: 7,
+                pass: 3,
+            };
+            let run = |avx: bool| {
+                let mut maps = [0, 1].map(|_| PhotonBatch::new(record, &scene.grid));
+                let [g, c] = &mut maps;
+                let mut scratch = TraceScratch::default();
+                let splits = if avx {
+                    // SAFETY: the CPU has AVX (checked above).
+                    unsafe { chunk.trace_avx(0..8_000, (g, c), &mut scratch) }
+                } else {
+                    chunk.trace_in(0..8_000, (g, c), &mut scratch)
+                };
+                (format!("{maps:?}"), splits, maps[0].len() + maps[1].len())
+            };
+            let (avx, portable) = (run(true), run(false));
+            assert!(portable.2 > 1_000, "{name}: {} photons stored", portable.2);
+            assert!(name != "prism" || portable.1 > 0, "{name}: no splits");
+            assert!(avx == portable, "{name}: the copies differ");
+        }
+    }
 
     #[test]
     fn splitting_conserves_flux_for_every_bin_count() {
