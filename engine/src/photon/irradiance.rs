@@ -70,7 +70,7 @@ fn cell_key(p: Vec3, n: Vec3, inv_cell: f32) -> CellKey {
         2
     };
     let side = (axis * 2 + (n[axis] < 0.0) as usize) as u8;
-    let q = |v: f32| (v * inv_cell).floor().clamp(-1e9, 1e9) as i32;
+    let q = |v: f32| super::occupancy::floor_clamped(v * inv_cell);
     (q(p.x), q(p.y), q(p.z), side)
 }
 
