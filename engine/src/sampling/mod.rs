@@ -110,9 +110,10 @@ pub fn kronecker(i: u32, step: f64, offset: f32) -> f32 {
     let x = offset as f64 + i as f64 * step;
     // x.fract() without its libm `trunc` call (x86-64's baseline has no rounding
     // instruction; this was 1 % of a prism render): x − ⌊x⌋ for 0 ≤ x < 2³², where the
-    // cast truncates exactly, so the same bits.
+    // cast truncates exactly, so the same bits. To i64, not u64: x86-64 converts a double
+    // to a signed integer in one instruction, to an unsigned one in a branchy sequence.
     let v = if (0.0..4_294_967_296.0).contains(&x) {
-        (x - (x as u64) as f64) as f32
+        (x - (x as i64) as f64) as f32
     } else {
         x.fract() as f32
     };
