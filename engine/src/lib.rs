@@ -29,6 +29,7 @@
 // `!(x > 0.0)` is written on purpose throughout: it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod cpu;
 pub mod geometry;
 pub mod lights;
 pub mod materials;

@@ -86,7 +86,7 @@ impl Flat {
             .collect();
         Self {
             blocks,
-            avx: has_avx(),
+            avx: crate::cpu::has_avx(),
         }
     }
 
@@ -135,17 +135,6 @@ impl Flat {
         }
         let w = Wide::new(ray);
         self.blocks.iter().map(|b| b.test(&w)).collect()
-    }
-}
-
-fn has_avx() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::is_x86_feature_detected!("avx")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
     }
 }
 

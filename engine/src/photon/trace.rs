@@ -221,7 +221,7 @@ impl Chunk<'_> {
         scratch: &mut TraceScratch,
     ) -> u64 {
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx") {
+        if crate::cpu::has_avx() {
             // SAFETY: the CPU has AVX (checked just above).
             return unsafe { self.trace_avx(ids, maps, scratch) };
         }
@@ -485,7 +485,7 @@ mod tests {
     fn the_tracers_avx_copy_stores_what_the_portable_one_does_to_the_bit() {
         // The prism at 100 bins (dispersive splits, caustic photons), compact, and the
         // Cornell box at 20 bins, full: the same photons, records and splits either way.
-        if !std::is_x86_feature_detected!("avx") {
+        if !crate::cpu::has_avx() {
             eprintln!("this CPU has no AVX: only the portable copy runs");
             return;
         }

@@ -51,8 +51,8 @@ pub struct Gather<'a> {
     /// tan(yfov / 2) of the scene's camera ([`camera_tan_half_fov`]): once per pass, not
     /// a libm call per pixel (1 % of a one-sample prism pass).
     pub tan_half_fov: f32,
-    /// Whether [`Gather::block`] runs its AVX copy (only where
-    /// [`Gather::avx_available`]; the same results either way).
+    /// Whether [`Gather::block`] runs its AVX copy (only where [`crate::cpu::has_avx`];
+    /// the same results either way).
     pub avx: bool,
 }
 
@@ -236,7 +236,7 @@ impl Gather<'_> {
     ) {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only where the CPU has AVX (`Gather::avx_available`).
+            // SAFETY: `avx` is set only where the CPU has AVX (`crate::cpu::has_avx`).
             unsafe { self.block_avx(pixels, size, rngs, s, outs) };
             return;
         }
@@ -255,18 +255,6 @@ impl Gather<'_> {
         outs: &mut [Vec<f32>],
     ) {
         self.block_in(pixels, size, rngs, s, outs);
-    }
-
-    /// Whether this CPU runs [`Self::block_avx`] (set [`Gather::avx`] from it).
-    pub fn avx_available() -> bool {
-        #[cfg(target_arch = "x86_64")]
-        {
-            std::is_x86_feature_detected!("avx")
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            false
-        }
     }
 
     /// [`Self::block`]'s body, inlined into each of its two copies.
@@ -688,11 +676,11 @@ impl Gather<'_> {
             mat.absorb_inside(&hit, t);
             match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {
-                    // No cache point within the search cap means (almost surely) fewer than
-                    // a handful of photons there: the irradiance is taken as 0 rather than
-                    // paying a full search for it.
                     // The irradiance E: a cached point's own N floats where the cache
-                    // keeps them (no copy), else decoded or estimated into `out`.
+                    // keeps them (no copy), else decoded or estimated into `out`. No cache
+                    // point within the search cap means (almost surely) fewer than a
+                    // handful of photons there: the ray adds nothing, rather than paying a
+                    // full search for it.
                     let e: &[f32] = match self.irradiance {
                         Some(c) => match c.nearest(p, nf) {
                             None => return,
@@ -994,7 +982,28 @@ mod tests {
             max_bounces: 16,
             caustic_reuse: CAUSTIC_REUSE,
             tan_half_fov: camera_tan_half_fov(&scene.camera),
-            avx: Gather::avx_available(),
+            avx: crate::cpu::has_avx(),
+        }
+    }
+
+    /// The Cornell box on 2 bins and an empty photon map, for the pooling tests (their
+    /// sums are set by hand).
+    fn two_bin_box() -> (SpectralScene, PhotonMap) {
+        use crate::spectral::BinGrid;
+        let scene = crate::scene::load_builtin("cornell-box").unwrap();
+        let scene = SpectralScene::new(&scene, BinGrid::with_bins(2).unwrap());
+        let record = crate::photon::record::Record::Full;
+        let empty = PhotonMap::build(crate::photon::PhotonBatch::new(record, &scene.grid));
+        (scene, empty)
+    }
+
+    /// A pooled gather of 2 camera samples and 2 rays a pixel.
+    fn pooling_gather<'a>(scene: &'a SpectralScene, empty: &'a PhotonMap) -> Gather<'a> {
+        Gather {
+            final_gather_rays: 2,
+            pool_gather: true,
+            camera_samples: 2,
+            ..test_gather(scene, empty, None, Kernel::adaptive(8, 1.0, 1.0, 1.0))
         }
     }
 
@@ -1002,20 +1011,8 @@ mod tests {
     fn a_block_pools_its_uniform_pixels_rays_exactly_and_keeps_a_nan_at_home() {
         // Four pixels of 2 camera samples and 2 rays each, hand-set: 0, 1 and 3 on one
         // plane (1's rays brought back a NaN), 2 across an edge (its samples on two walls).
-        use crate::scene::load_builtin;
-        use crate::spectral::BinGrid;
-        let grid = BinGrid::with_bins(2).unwrap();
-        let scene = SpectralScene::new(&load_builtin("cornell-box").unwrap(), grid);
-        let empty = PhotonMap::build(crate::photon::PhotonBatch::new(
-            crate::photon::record::Record::Full,
-            &scene.grid,
-        ));
-        let gather = Gather {
-            final_gather_rays: 2,
-            pool_gather: true,
-            camera_samples: 2,
-            ..test_gather(&scene, &empty, None, Kernel::adaptive(8, 1.0, 1.0, 1.0))
-        };
+        let (scene, empty) = two_bin_box();
+        let gather = pooling_gather(&scene, &empty);
         let mut s = Scratch::new(2);
         let hit = |x: f32, nf: Vec3| PoolHit {
             p: Vec3::new(x, 0.0, 0.0),
@@ -1069,20 +1066,8 @@ mod tests {
         // The block's sums are not cleared between blocks: pixels 1 and 3 saw no diffuse
         // surface, so their slots still hold another block's values (NaN here); pixel 0
         // pools with pixel 2 only, and 1 and 3 get no final-gather light.
-        use crate::scene::load_builtin;
-        use crate::spectral::BinGrid;
-        let grid = BinGrid::with_bins(2).unwrap();
-        let scene = SpectralScene::new(&load_builtin("cornell-box").unwrap(), grid);
-        let empty = PhotonMap::build(crate::photon::PhotonBatch::new(
-            crate::photon::record::Record::Full,
-            &scene.grid,
-        ));
-        let gather = Gather {
-            final_gather_rays: 2,
-            pool_gather: true,
-            camera_samples: 2,
-            ..test_gather(&scene, &empty, None, Kernel::adaptive(8, 1.0, 1.0, 1.0))
-        };
+        let (scene, empty) = two_bin_box();
+        let gather = pooling_gather(&scene, &empty);
         let mut s = Scratch::new(2);
         let seen = |x: f32| PixelPool {
             first: Some(PoolHit {

@@ -241,7 +241,7 @@ impl RenderSession {
             emitter_pixels: std::sync::OnceLock::new(),
             guides: std::sync::OnceLock::new(),
             caustic_reuse: super::gather::CAUSTIC_REUSE,
-            avx: Gather::avx_available(),
+            avx: crate::cpu::has_avx(),
         }
     }
 
@@ -912,7 +912,7 @@ mod tests {
         // The prism at 100 bins (caustic map, irradiance cache, pooled rays, glass seen
         // directly), unpooled, and the Cornell box (also with the global map shown
         // directly), and Blender's textured glass: every pixel of every pass the same bits either way.
-        if !Gather::avx_available() {
+        if !crate::cpu::has_avx() {
             eprintln!("this CPU has no AVX: only the portable copy runs");
             return;
         }
