@@ -24,6 +24,10 @@ use crate::scene::{self, Scene};
 use orbit::Orbit;
 use worker::{Command, Snapshot, Worker};
 
+/// How soon after the worker's news the window repaints: not zero, which egui answers
+/// with two frames instead of one.
+const WAKE_DELAY: std::time::Duration = std::time::Duration::from_millis(1);
+
 pub use crate::output::ToneMap;
 
 /// What a panel asks the viewer to do. Panels push actions while they draw; the viewer
@@ -166,7 +170,10 @@ impl ViewerApp {
         capture: Option<Capture>,
     ) -> Self {
         let repaint_ctx = ctx.clone();
-        let worker = Worker::spawn(move || repaint_ctx.request_repaint());
+        // One frame for each piece of news. `request_repaint` paints two (egui's margin for
+        // responses that arrive a frame late); a new image needs only the frame that uploads
+        // it, and a software-rendered window spends a third of the CPU on frames otherwise.
+        let worker = Worker::spawn(move || repaint_ctx.request_repaint_after(WAKE_DELAY));
         let (scene, status) = match source.load() {
             Ok(s) => (s, String::new()),
             Err(e) => (
@@ -618,7 +625,7 @@ impl ViewerApp {
                 self.settings.storage = storage;
                 self.restart();
             }
-            ctx.request_repaint_after(std::time::Duration::from_millis(100));
+            ctx.request_repaint_after(std::time::Duration::from_millis(500));
             return;
         }
         if !self.capture_requested && current && passes >= c.after_passes {
@@ -641,9 +648,10 @@ impl ViewerApp {
             ctx.request_repaint();
             return;
         }
-        // The worker's news repaints; this only polls for the pass count, so that a
-        // software-rendered window does not spend a core on frames nobody needs.
-        ctx.request_repaint_after(std::time::Duration::from_millis(100));
+        // The worker's news repaints, and each new pass is checked in its frame; this slow
+        // poll is only a safety net, so that a software-rendered window does not spend a
+        // core on frames nobody needs.
+        ctx.request_repaint_after(std::time::Duration::from_millis(500));
     }
 
     /// The whole UI for one frame.
