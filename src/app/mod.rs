@@ -28,6 +28,10 @@ use worker::{Command, Snapshot, Worker};
 /// with two frames instead of one.
 const WAKE_DELAY: std::time::Duration = std::time::Duration::from_millis(1);
 
+/// The scripted capture's poll for its pass count: only a safety net, since the worker's
+/// news wakes the frame that checks it.
+const CAPTURE_POLL: std::time::Duration = std::time::Duration::from_millis(500);
+
 pub use crate::output::ToneMap;
 
 /// What a panel asks the viewer to do. Panels push actions while they draw; the viewer
@@ -625,7 +629,7 @@ impl ViewerApp {
                 self.settings.storage = storage;
                 self.restart();
             }
-            ctx.request_repaint_after(std::time::Duration::from_millis(500));
+            ctx.request_repaint_after(CAPTURE_POLL);
             return;
         }
         if !self.capture_requested && current && passes >= c.after_passes {
@@ -651,7 +655,7 @@ impl ViewerApp {
         // The worker's news repaints, and each new pass is checked in its frame; this slow
         // poll is only a safety net, so that a software-rendered window does not spend a
         // core on frames nobody needs.
-        ctx.request_repaint_after(std::time::Duration::from_millis(500));
+        ctx.request_repaint_after(CAPTURE_POLL);
     }
 
     /// The whole UI for one frame.
