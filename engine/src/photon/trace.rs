@@ -89,10 +89,49 @@ struct Role {
     /// Traced to the end of its path, stored at every diffuse hit (else: a caustic-only
     /// photon, ended at its first diffuse hit).
     global: bool,
+    /// Aimed at the scene's specular target (caustic-only photons, where lights aim).
+    aimed: bool,
     /// Photons its emitted flux is shared among (`photons`, or all caustic photons).
     emitted_among: usize,
     /// Factor from its flux to its caustic record's flux.
     caustic_scale: f32,
+}
+
+/// The caustic-only photon count and the two roles when lights aim their caustic-only
+/// photons at the specular target, `share` of whose unaimed photons would head into it
+/// ([`crate::lights::LightSet::aimed_share`]). The caustic map is then a fixed blend of
+/// two unbiased estimates: the global photons' caustic records at weight α, the aimed
+/// photons' at 1 − α. α = P·s / (P·s + M) (P global photons, s the share, M aimed ones)
+/// is the balance heuristic's weight in expectation: a global photon's caustic record
+/// then carries the flux an aimed one does, so neither makes speckles of the other.
+///
+/// M = (factor − 1)·P·√s: aimed photons all head for the glass, and each one that
+/// reaches it costs the split, the trace through it and the estimates where it lands,
+/// so the count is cut between the unaimed photons' useful number ((factor − 1)·P·s,
+/// the same cost) and their whole number (the same count) — their geometric mean.
+fn aimed_roles(photons: usize, factor: usize, share: f32) -> (usize, Role, Role) {
+    let share = f64::from(share).clamp(1e-12, 1.0);
+    let extra = (photons as f64) * (factor.saturating_sub(1) as f64);
+    let aimed = (extra * share.sqrt()).ceil().min(extra) as usize;
+    let useful_global = photons as f64 * share;
+    let alpha = if aimed == 0 {
+        1.0
+    } else {
+        useful_global / (useful_global + aimed as f64)
+    };
+    let global = Role {
+        global: true,
+        aimed: false,
+        emitted_among: photons,
+        caustic_scale: alpha as f32,
+    };
+    let caustic = Role {
+        global: false,
+        aimed: true,
+        emitted_among: aimed.max(1),
+        caustic_scale: (1.0 - alpha) as f32,
+    };
+    (photons.saturating_add(aimed), global, caustic)
 }
 
 /// Traces `settings.photons` photons for pass `pass`.
@@ -109,16 +148,23 @@ pub fn trace_photons(
     } else {
         1
     };
-    let caustic_photons = settings.photons.saturating_mul(factor);
-    let global_role = Role {
-        global: true,
-        emitted_among: settings.photons,
-        caustic_scale: 1.0 / factor as f32,
-    };
-    let caustic_role = Role {
-        global: false,
-        emitted_among: caustic_photons,
-        caustic_scale: 1.0,
+    let (caustic_photons, global_role, caustic_role) = if caustic && scene.lights.aims() {
+        aimed_roles(settings.photons, factor, scene.lights.aimed_share())
+    } else {
+        let caustic_photons = settings.photons.saturating_mul(factor);
+        let global_role = Role {
+            global: true,
+            aimed: false,
+            emitted_among: settings.photons,
+            caustic_scale: 1.0 / factor as f32,
+        };
+        let caustic_role = Role {
+            global: false,
+            aimed: false,
+            emitted_among: caustic_photons,
+            caustic_scale: 1.0,
+        };
+        (caustic_photons, global_role, caustic_role)
     };
     let chunks = caustic_photons.div_ceil(CHUNK);
     let used = AtomicUsize::new(0);
@@ -280,7 +326,7 @@ fn trace_one(
     let Some((origin, dir)) =
         scene
             .lights
-            .emit_into(&scene.tris, &scene.accel, among, rng, &mut flux)
+            .emit_into(&scene.tris, &scene.accel, among, role.aimed, rng, &mut flux)
     else {
         spare.push(flux);
         return 0;
@@ -326,7 +372,7 @@ fn trace_one(
                     };
                     if !role.global {
                         if caustic_path {
-                            store(caustics, 1.0);
+                            store(caustics, role.caustic_scale);
                         }
                         break;
                     }
@@ -507,6 +553,7 @@ mod tests {
             };
             let role = |global: bool| Role {
                 global,
+                aimed: false,
                 emitted_among: 2_000,
                 caustic_scale: 0.25,
             };

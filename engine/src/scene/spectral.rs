@@ -7,7 +7,7 @@ use glam::Vec3;
 use super::texture::TextureRef;
 use super::{Material, MaterialKind, PunctualKind, PunctualLight, Scene};
 use crate::geometry::{Accel, SurfaceHit, TriData, triangle_normal};
-use crate::lights::{Light, LightKind, LightSet};
+use crate::lights::{Light, LightKind, LightSet, Target};
 use crate::photon::record::{NormalCode, oct_encode};
 use crate::sampling::one_minus_cos;
 use crate::spectral::{BinGrid, Role, Spectrum, Transport, spd};
@@ -160,10 +160,14 @@ impl SpectralScene {
         if let Some((holed, cutouts)) = AlphaCutouts::of(scene, &tris) {
             accel.set_cutouts(&holed, std::sync::Arc::new(cutouts));
         }
+        let mut lights = LightSet::new(lights, &tris);
+        if let Some(target) = specular_target(scene, &materials) {
+            lights.aim_at(target);
+        }
         Self {
             name: scene.name.clone(),
             accel,
-            lights: LightSet::new(lights, &tris),
+            lights,
             environment,
             grid,
             normal_codes: tris
@@ -697,6 +701,36 @@ fn triangles_and_area_lights(
         }
     }
     (tris, lights, diffuse_area)
+}
+
+/// The sphere around every mirror and glass triangle (the centre of their box, the
+/// farthest vertex from it, a little larger): None when there is none.
+fn specular_target(scene: &Scene, materials: &[SMaterial]) -> Option<Target> {
+    let specular = |m: u32| {
+        materials
+            .get(m as usize)
+            .is_some_and(|m| !matches!(m.kind, SurfaceKind::Diffuse { .. }))
+    };
+    let tris = || {
+        scene
+            .triangles
+            .iter()
+            .zip(&scene.triangle_material)
+            .filter(|(_, m)| specular(**m))
+            .flat_map(|(t, _)| t.iter().copied())
+    };
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for v in tris() {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        return None;
+    }
+    let center = 0.5 * (lo + hi);
+    let radius = tris().map(|v| v.distance(center)).fold(0.0f32, f32::max);
+    let radius = radius * 1.001 + 1e-5 * (1.0 + center.abs().max_element());
+    radius.is_finite().then_some(Target { center, radius })
 }
 
 /// A sphere around the bounds, a little larger so that photons from a distant light or
