@@ -65,6 +65,44 @@ fn render_picks_the_bins_the_scene_needs_unless_told() {
 }
 
 #[test]
+fn stats_say_where_caustic_photons_were_aimed_at_the_glass() {
+    // Blender's sun-lit glass ball aims its caustic-only photons, and sends fewer of them
+    // than the unaimed (factor − 1) × photons; the prism's spot is narrower than its glass,
+    // and the Cornell box has none.
+    let dir = temp_dir("aimed");
+    let blender = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/blender/textured-glass.glb"
+    );
+    for (i, (scene, aimed)) in [(blender, true), ("prism", false), ("cornell-box", false)]
+        .into_iter()
+        .enumerate()
+    {
+        let stats = dir.join(format!("{i}.json"));
+        succeeds(
+            prismap()
+                .args(["render", scene, "--passes", "1", "--size", "16x16"])
+                .args(["--photons", "2000", "--caustic-factor", "4", "--bins", "8"])
+                .arg("-o")
+                .arg(dir.join(format!("{i}.png")))
+                .arg("--stats")
+                .arg(&stats),
+        );
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        let photons = &s["photons"];
+        assert_eq!(photons["caustic_aimed"], aimed, "{scene}: {photons}");
+        let extra = photons["caustic_emitted"].as_u64().unwrap();
+        match (aimed, scene) {
+            (true, _) => assert!((1..6000).contains(&extra), "{scene}: {photons}"),
+            (false, "prism") => assert_eq!(extra, 6000, "{scene}: {photons}"),
+            _ => assert_eq!(extra, 0, "{scene}: {photons}"),
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn render_writes_png_exr_and_stats() {
     let dir = temp_dir("ok");
     let png = dir.join("cb.png");

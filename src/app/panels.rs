@@ -410,10 +410,12 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         );
                         row("photons emitted", st.photons_emitted.to_string());
                         if st.caustic_photons_emitted > 0 {
-                            row(
-                                "+ for caustics",
-                                st.caustic_photons_emitted.to_string(),
-                            );
+                            let label = if st.caustic_photons_aimed {
+                                "+ aimed at glass"
+                            } else {
+                                "+ for caustics"
+                            };
+                            row(label, st.caustic_photons_emitted.to_string());
                         }
                         row("stored (global)", st.stored_global.to_string());
                         row("stored (caustic)", st.stored_caustic.to_string());

@@ -45,6 +45,9 @@ pub struct PhotonStats {
     /// Photons emitted for the caustic map only (`--caustic-factor`).
     #[serde(default)]
     pub caustic_emitted: u64,
+    /// Whether point, spot and sun lights aimed those photons at the glass and mirrors.
+    #[serde(default)]
+    pub caustic_aimed: bool,
     pub stored_global: u64,
     pub stored_caustic: u64,
     pub spike_records: u64,
@@ -108,6 +111,7 @@ impl Stats {
             photons: PhotonStats {
                 emitted: st.photons_emitted,
                 caustic_emitted: st.caustic_photons_emitted,
+                caustic_aimed: st.caustic_photons_aimed,
                 stored_global: st.stored_global,
                 stored_caustic: st.stored_caustic,
                 spike_records: st.spike_records,

@@ -56,6 +56,9 @@ pub struct PhotonPass {
     pub emitted: u64,
     /// Photons emitted for the caustic map only (see [`PhotonSettings::caustic_factor`]).
     pub caustic_emitted: u64,
+    /// Whether the caustic-only photons were aimed at the specular target (see
+    /// [`crate::lights::LightSet::aim_at`]).
+    pub caustic_aimed: bool,
     pub splits: u64,
 }
 
@@ -148,7 +151,8 @@ pub fn trace_photons(
     } else {
         1
     };
-    let (caustic_photons, global_role, caustic_role) = if caustic && scene.lights.aims() {
+    let aimed = caustic && factor > 1 && scene.lights.aims();
+    let (caustic_photons, global_role, caustic_role) = if aimed {
         aimed_roles(settings.photons, factor, scene.lights.aimed_share())
     } else {
         let caustic_photons = settings.photons.saturating_mul(factor);
@@ -229,6 +233,7 @@ pub fn trace_photons(
         caustic: caustic_map,
         emitted: settings.photons as u64,
         caustic_emitted: (caustic_photons - settings.photons) as u64,
+        caustic_aimed: aimed,
         splits,
     })
 }

@@ -102,6 +102,8 @@ pub struct RenderStats {
     pub photons_emitted: u64,
     /// Photons emitted for the caustic map only ([`RenderSettings::caustic_factor`]).
     pub caustic_photons_emitted: u64,
+    /// Whether the latest pass aimed its caustic-only photons at the glass and mirrors.
+    pub caustic_photons_aimed: bool,
     /// Photons stored in the latest pass's maps.
     pub stored_global: u64,
     pub stored_caustic: u64,
@@ -756,6 +758,7 @@ impl RenderSession {
         st.budget_note = prepared.budget_note.clone();
         st.photons_emitted += maps.emitted;
         st.caustic_photons_emitted += maps.caustic_emitted;
+        st.caustic_photons_aimed = maps.caustic_aimed;
         st.stored_global = maps.global.len() as u64;
         st.stored_caustic = maps.caustic.as_ref().map_or(0, |c| c.len() as u64);
         st.spike_records = maps.global.spike_records() as u64
