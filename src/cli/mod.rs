@@ -94,9 +94,9 @@ pub struct RenderArgs {
     #[arg(long)]
     pub split: Option<usize>,
     /// Caustic-map photons per pass, as a multiple of --photons (1: only the global
-    /// photons' caustic paths; the extra ones end at their first diffuse hit). Point,
-    /// spot and sun lights aim the extra ones at the scene's glass and mirrors, and then
-    /// send fewer of them.
+    /// photons' caustic paths; the extra ones end at their first diffuse hit). Lights
+    /// aim the extra ones at the scene's glass and mirrors where they can, and then send
+    /// fewer of them.
     #[arg(long)]
     pub caustic_factor: Option<usize>,
     /// Neighbours a global-map density estimate adapts its radius to.

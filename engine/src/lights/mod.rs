@@ -74,23 +74,31 @@ enum AimKind {
     Cone { axis: Vec3, omc: f32 },
     /// Starts on the disc of `radius` about `center`, on the light's start plane.
     Disc { center: Vec3, radius: f32 },
+    /// Aimed photon by photon at the target itself: an area light's, from the point it
+    /// leaves (into the target's cone from there), and the sky's, along the direction it
+    /// arrives from (from the target's shadow disc on its start plane).
+    Target(Target),
+}
+
+/// The cone from `position` that holds `target`: its axis and 1 − cos of its half-angle;
+/// None from inside (or at the edge of) the sphere, where every direction may reach it.
+#[inline]
+fn cone_to(target: Target, position: Vec3) -> Option<(Vec3, f32)> {
+    let to = target.center - position;
+    let d = to.length();
+    if !(d > target.radius * 1.001) || !d.is_finite() {
+        return None;
+    }
+    let sin = target.radius / d;
+    // 1 − cos θ = sin²θ / (1 + cos θ): precise for a small, far target.
+    let omc = sin * sin / (1.0 + (1.0 - sin * sin).max(0.0).sqrt());
+    (omc > 0.0).then_some((to / d, omc))
 }
 
 impl Aim {
     /// How `light` aims at `target`; None where aiming would not narrow its emission.
-    fn of(light: &Light, target: Target) -> Option<Self> {
-        let cone_from = |position: Vec3| {
-            let to = target.center - position;
-            let d = to.length();
-            // From inside (or at the edge of) the sphere every direction may reach it.
-            if !(d > target.radius * 1.001) || !d.is_finite() {
-                return None;
-            }
-            let sin = target.radius / d;
-            // 1 − cos θ = sin²θ / (1 + cos θ): precise for a small, far target.
-            let omc = sin * sin / (1.0 + (1.0 - sin * sin).max(0.0).sqrt());
-            (omc > 0.0).then_some((to / d, omc))
-        };
+    fn of(light: &Light, tris: &[TriData], target: Target) -> Option<Self> {
+        let cone_from = |position: Vec3| cone_to(target, position);
         let (kind, share) = match light.kind {
             LightKind::Point { position } => {
                 let (axis, omc) = cone_from(position)?;
@@ -128,7 +136,25 @@ impl Aim {
                     share,
                 )
             }
-            LightKind::Area { .. } | LightKind::Environment { .. } => return None,
+            LightKind::Area { tri } => {
+                // Only a triangle whose plane keeps the whole sphere in front of it, so
+                // that every point of it sees the sphere from outside.
+                let t = tris.get(tri as usize)?;
+                if !(t.normal.dot(target.center - t.v0) > target.radius * 1.001) {
+                    return None;
+                }
+                // The share of its cosine-weighted photons into the cone from its
+                // centroid: the cone's projected solid angle over π, sin²θ·cos γ.
+                let (axis, omc) = cone_from(t.v0 + (t.e1 + t.e2) / 3.0)?;
+                let share = omc * (2.0 - omc) * axis.dot(t.normal);
+                (AimKind::Target(target), share)
+            }
+            LightKind::Environment { radius, .. } => {
+                if !(target.radius < radius) {
+                    return None;
+                }
+                (AimKind::Target(target), (target.radius / radius).powi(2))
+            }
         };
         (share.is_finite() && share > 0.0 && share < 1.0).then_some(Self { kind, share })
     }
@@ -150,9 +176,12 @@ pub struct LightSet {
     /// Per light, how its caustic-only photons are aimed at the scene's [`Target`] (see
     /// [`Self::aim_at`]); empty when nothing is aimed.
     aims: Vec<Option<Aim>>,
-    /// Σ over lights of emit pmf × the share of its unaimed photons that would head into
-    /// the target (1 for a light that is not aimed).
-    aimed_share: f32,
+    /// Per light, the probability that an aimed caustic-only photon leaves it (emit pmf
+    /// × √share, normalised; see [`Self::aimed_pmf`]); empty when nothing is aimed.
+    aimed_pmf: Vec<f32>,
+    aimed_cdf: Vec<f32>,
+    /// Σ over lights of emit pmf × √share (1 when nothing is aimed).
+    aimed_count: f64,
     emit_pmf: Vec<f32>,
     emit_cdf: Vec<f32>,
     direct_pmf: Vec<f32>,
@@ -197,7 +226,9 @@ impl LightSet {
             .collect();
         Self {
             aims: Vec::new(),
-            aimed_share: 1.0,
+            aimed_pmf: Vec::new(),
+            aimed_cdf: Vec::new(),
+            aimed_count: 1.0,
             emit_cdf: cdf(&emit_pmf),
             direct_cdf: cdf(&direct_pmf),
             emit_pmf,
@@ -218,27 +249,41 @@ impl LightSet {
         self.lights.iter()
     }
 
-    /// Aims the caustic-only photons of point, spot and distant lights at `target` (the
-    /// sphere around every mirror and glass triangle): a caustic path's first hit lies
-    /// inside it, so a photon that misses it cannot be a caustic photon. A point light then
-    /// emits into the sphere's cone, a spot into that cone where it is narrower than its
-    /// own (directions outside the spot carry its zero falloff), a distant light from the
-    /// sphere's shadow disc on its start plane; each photon's weight is the sampled solid
-    /// angle or area, so every aimed light's caustic flux is unbiased. Area lights and the
-    /// sky, and lights inside the sphere, emit as before.
-    pub fn aim_at(&mut self, target: Target) {
-        self.aims = self.lights.iter().map(|l| Aim::of(l, target)).collect();
-        self.aimed_share = self
-            .aims
+    /// Aims the caustic-only photons at `target` (the sphere around every mirror and glass
+    /// triangle): a caustic path's first hit lies inside it, so a photon that misses it
+    /// cannot be a caustic photon. A point light then emits into the sphere's cone, a spot
+    /// into that cone where it is narrower than its own (directions outside the spot carry
+    /// its zero falloff), a distant light from the sphere's shadow disc on its start plane,
+    /// an area triangle into the cone from the point each photon leaves (where its plane
+    /// keeps the sphere in front of it), the sky along each direction from the sphere's
+    /// shadow disc. Each photon's weight is the sampled solid angle or area, so every aimed
+    /// light's caustic flux is unbiased. Lights inside the sphere emit as before.
+    ///
+    /// Each light's share s (of its unaimed photons that would head into the sphere; 1 for
+    /// a light that does not aim) sets how many aimed photons it gets: in proportion to
+    /// emit pmf × √s ([`Self::aimed_pmf`]), the geometric mean of its unaimed photons'
+    /// useful count and whole count (see `photon::trace`).
+    pub fn aim_at(&mut self, target: Target, tris: &[TriData]) {
+        self.aims = self
+            .lights
             .iter()
-            .zip(&self.emit_pmf)
-            .map(|(a, &pmf)| pmf * a.as_ref().map_or(1.0, |a| a.share))
-            .sum::<f32>()
-            .clamp(0.0, 1.0);
+            .map(|l| Aim::of(l, tris, target))
+            .collect();
         if self.aims.iter().all(Option::is_none) {
             self.aims.clear();
-            self.aimed_share = 1.0;
+            return;
         }
+        let weights: Vec<f64> = (0..self.lights.len())
+            .map(|i| f64::from(self.emit_pmf[i]) * f64::from(self.share(i)).sqrt())
+            .collect();
+        let total: f64 = weights.iter().sum();
+        if !(total > 0.0) {
+            self.aims.clear();
+            return;
+        }
+        self.aimed_count = total.min(1.0);
+        self.aimed_pmf = weights.iter().map(|w| (w / total) as f32).collect();
+        self.aimed_cdf = cdf(&self.aimed_pmf);
     }
 
     /// Whether any light aims its caustic-only photons ([`Self::aim_at`]).
@@ -246,10 +291,22 @@ impl LightSet {
         !self.aims.is_empty()
     }
 
-    /// The expected share of unaimed caustic-only photons that would head into the
-    /// target (1 when nothing is aimed): how much denser the aimed photons are.
-    pub fn aimed_share(&self) -> f32 {
-        self.aimed_share
+    /// The share of light `i`'s unaimed photons that would head into the target (1 for a
+    /// light that does not aim): how much denser its aimed photons are.
+    pub fn share(&self, i: usize) -> f32 {
+        self.aims.get(i).copied().flatten().map_or(1.0, |a| a.share)
+    }
+
+    /// Σ over lights of emit pmf × √share: aimed caustic-only photons, per unaimed one
+    /// (1 when nothing is aimed).
+    pub fn aimed_count(&self) -> f64 {
+        self.aimed_count
+    }
+
+    /// Probability that an aimed caustic-only photon leaves light `i` (its emit pmf when
+    /// nothing is aimed).
+    pub fn aimed_pmf(&self, i: usize) -> f32 {
+        self.aimed_pmf.get(i).copied().unwrap_or(self.emit_pmf[i])
     }
 
     /// Probability that a photon leaves light `i`.
@@ -266,13 +323,14 @@ impl LightSet {
         rng: &mut Rng,
     ) -> Option<Emitted> {
         let mut flux = Vec::new();
-        let (origin, dir) = self.emit_into(tris, accel, photons, false, rng, &mut flux)?;
+        let (origin, dir, _) = self.emit_into(tris, accel, photons, false, rng, &mut flux)?;
         Some(Emitted { origin, dir, flux })
     }
 
     /// [`Self::emit`] with the flux written into `flux` (resized to the bins; no
-    /// allocation once it has been): returns the photon's origin and direction. `aimed`:
-    /// a caustic-only photon, aimed at the target where its light is ([`Self::aim_at`]).
+    /// allocation once it has been): returns the photon's origin, direction and light.
+    /// `aimed`: a caustic-only photon, from a light chosen by [`Self::aimed_pmf`] and aimed
+    /// at the target where that light aims ([`Self::aim_at`]).
     pub fn emit_into(
         &self,
         tris: &[TriData],
@@ -281,21 +339,23 @@ impl LightSet {
         aimed: bool,
         rng: &mut Rng,
         flux: &mut Vec<f32>,
-    ) -> Option<(Vec3, Vec3)> {
+    ) -> Option<(Vec3, Vec3, usize)> {
         use std::f32::consts::PI;
         if self.lights.is_empty() {
             return None;
         }
-        let li = sample_cdf(&self.emit_cdf, rng.next_f32());
-        let (light, pmf) = (&self.lights[li], self.emit_pmf[li]);
+        let aimed = aimed && self.aims();
+        let (cdf, pmfs) = if aimed {
+            (&self.aimed_cdf, &self.aimed_pmf)
+        } else {
+            (&self.emit_cdf, &self.emit_pmf)
+        };
+        let li = sample_cdf(cdf, rng.next_f32());
+        let (light, pmf) = (&self.lights[li], pmfs[li]);
         if !(pmf > 0.0) {
             return None;
         }
-        let aim = if aimed {
-            self.aims.get(li).copied().flatten()
-        } else {
-            None
-        };
+        let aim = if aimed { self.aims[li] } else { None };
         let (origin, dir, weight) = match (light.kind, aim) {
             (
                 LightKind::Point { position },
@@ -337,12 +397,47 @@ impl LightSet {
                 let origin = center + disc_point(dir, radius, rng.next_2d());
                 (origin, dir, PI * radius * radius)
             }
+            (
+                LightKind::Area { tri },
+                Some(Aim {
+                    kind: AimKind::Target(target),
+                    ..
+                }),
+            ) => {
+                let t = &tris[tri as usize];
+                let (b1, b2) = uniform_triangle(rng.next_2d());
+                let p = t.v0 + t.e1 * b1 + t.e2 * b2;
+                let (axis, omc) = cone_to(target, p)?;
+                let dir = uniform_cone(axis, omc, rng.next_2d());
+                // Radiance × cos θ over the triangle and the cone (the cone's edge may dip
+                // below the triangle's horizon, where it emits nothing).
+                let cos = dir.dot(t.normal);
+                if !(cos > 0.0) {
+                    return None;
+                }
+                let origin = accel.offset(p, t.normal, dir);
+                (origin, dir, t.area * 2.0 * PI * omc * cos)
+            }
+            (
+                LightKind::Environment { center, radius },
+                Some(Aim {
+                    kind: AimKind::Target(target),
+                    ..
+                }),
+            ) => {
+                // As unaimed, but from the target's shadow disc on the start plane.
+                let dir = uniform_sphere(rng.next_2d());
+                let along = dir.dot(target.center - center) + radius;
+                let origin =
+                    target.center - dir * along + disc_point(dir, target.radius, rng.next_2d());
+                (origin, dir, 4.0 * PI * PI * target.radius * target.radius)
+            }
             (kind, _) => Self::emit_unaimed(&kind, tris, accel, rng),
         };
         flux.clear();
         flux.extend_from_slice(&light.spectrum);
         spd::scale(flux, weight / (pmf * photons as f32));
-        Some((origin, dir))
+        Some((origin, dir, li))
     }
 
     /// A photon's start, direction and weight (the flux per unit of the light's spectrum)
@@ -582,10 +677,12 @@ mod tests {
 
     #[test]
     fn aimed_photons_carry_into_the_target_the_flux_unaimed_ones_do() {
-        // A point light, a spot tilted so that the target sits on its falloff ramp, and a
-        // sun, each with a sphere off to one side. Unaimed, the flux of the photons whose
-        // ray meets the sphere estimates what enters it; aimed, every photon meets it
-        // (checked) and their flux must estimate the same, from far fewer photons.
+        // A point light, a spot tilted so that the target sits on its falloff ramp, a sun,
+        // an emissive triangle tilted away from the target (so that the cosine varies over
+        // the cone, and across the triangle the cone itself), and the sky, each with a
+        // sphere off to one side. Unaimed, the flux of the photons whose ray meets the
+        // sphere estimates what enters it; aimed, every photon meets it (checked) and their
+        // flux must estimate the same, from far fewer photons.
         use crate::sampling::{Purpose, Rng};
         let target = Target {
             center: Vec3::new(0.4, -1.0, 0.3),
@@ -601,6 +698,26 @@ mod tests {
             axis: Vec3::new(0.45, -1.0, 0.0).normalize(),
             omc_outer: crate::sampling::one_minus_cos(40f32.to_radians()),
             omc_inner: crate::sampling::one_minus_cos(10f32.to_radians()),
+        };
+        // A 0.6-wide triangle about the origin, facing down but tilted 40° away from the
+        // target (which it sees 63° off its normal from its centroid).
+        let (v0, v1, v2) = (
+            Vec3::new(-0.3, 0.0, -0.2),
+            Vec3::new(0.3, 0.0, -0.2),
+            Vec3::new(0.0, 0.0, 0.4),
+        );
+        let (e1, e2) = (v1 - v0, v2 - v0);
+        let tilt = glam::Quat::from_rotation_z(-40f32.to_radians());
+        let (e1, e2) = (tilt * e1, tilt * e2);
+        let normal = e1.cross(e2).normalize();
+        assert!(normal.y < 0.0 && normal.dot(target.center - v0) > target.radius);
+        let tri = TriData {
+            v0,
+            e1,
+            e2,
+            normal,
+            area: 0.5 * e1.cross(e2).length(),
+            material: 0,
         };
         let kinds = [
             (
@@ -618,24 +735,33 @@ mod tests {
                     radius: 2.0,
                 },
             ),
+            ("area", LightKind::Area { tri: 0 }),
+            (
+                "sky",
+                LightKind::Environment {
+                    center: Vec3::new(0.0, -1.0, 0.0),
+                    radius: 2.0,
+                },
+            ),
         ];
         let accel = Accel::new(&[]);
+        let tris = [tri];
         for (name, kind) in kinds {
             let light = Light {
                 kind,
                 spectrum: vec![1.0],
                 power: 1.0,
             };
-            let mut set = LightSet::new(vec![light], &[]);
-            set.aim_at(target);
+            let mut set = LightSet::new(vec![light], &tris);
+            set.aim_at(target, &tris);
             assert!(set.aims(), "{name} should aim");
             let total = |aimed: bool, photons: usize| {
                 let (mut sum, mut met) = (0.0f64, 0usize);
                 let mut flux = Vec::new();
                 for i in 0..photons {
                     let mut rng = Rng::stream(3, 1, i as u64, Purpose::Photon);
-                    if let Some((o, d)) =
-                        set.emit_into(&[], &accel, photons, aimed, &mut rng, &mut flux)
+                    if let Some((o, d, _)) =
+                        set.emit_into(&tris, &accel, photons, aimed, &mut rng, &mut flux)
                         && meets(o, d)
                     {
                         sum += f64::from(flux[0]);
@@ -645,12 +771,13 @@ mod tests {
                 (sum, met)
             };
             // 8 M unaimed photons put the reference within 0.3 % (1σ; 1.3 % of them meet
-            // the target from the point light).
+            // the target from the point light, 0.5 % from the sky).
             let (unaimed, _) = total(false, 8_000_000);
             let (aimed, met) = total(true, 100_000);
             let rel = aimed / unaimed - 1.0;
             println!(
-                "{name}: into the target {unaimed:.5} unaimed, {aimed:.5} aimed ({rel:+.4}), {met} aimed photons met it"
+                "{name}: into the target {unaimed:.5} unaimed, {aimed:.5} aimed ({rel:+.4}), {met} aimed photons met it, share {:.4}",
+                set.share(0)
             );
             assert!(
                 rel.abs() < 0.01,
@@ -658,6 +785,74 @@ mod tests {
             );
             assert_eq!(met, 100_000, "{name}: aimed photons missed the target");
         }
+    }
+
+    #[test]
+    fn aimed_photons_are_shared_among_lights_by_pmf_times_root_share() {
+        // A point light (aims: share s < 1) and an area light whose plane cuts the target
+        // (does not aim: share 1). The aimed photons go p·√s : p·1, and unaimed photons
+        // of the area light keep their own weights.
+        let target = Target {
+            center: Vec3::new(0.0, -2.0, 0.0),
+            radius: 0.25,
+        };
+        let (e1, e2) = (Vec3::new(0.0, 0.0, 1.0), Vec3::new(1.0, 0.0, 0.0));
+        let tri = TriData {
+            v0: Vec3::new(-0.5, -2.0, -0.5),
+            e1,
+            e2,
+            normal: e1.cross(e2).normalize(),
+            area: 0.5,
+            material: 0,
+        };
+        let lights = vec![
+            Light {
+                kind: LightKind::Point {
+                    position: Vec3::ZERO,
+                },
+                spectrum: vec![1.0],
+                power: 3.0,
+            },
+            Light {
+                kind: LightKind::Area { tri: 0 },
+                spectrum: vec![1.0],
+                power: 1.0,
+            },
+        ];
+        let tris = [tri];
+        let mut set = LightSet::new(lights, &tris);
+        set.aim_at(target, &tris);
+        assert!(set.aims());
+        let s = set.share(0);
+        assert!(s > 0.0 && s < 0.01, "the point light's share {s}");
+        assert_eq!(set.share(1), 1.0, "the area light cuts the target");
+        let (p0, p1) = (set.emit_pmf(0), set.emit_pmf(1));
+        let w = [f64::from(p0) * f64::from(s).sqrt(), f64::from(p1)];
+        let sum = w[0] + w[1];
+        assert!((set.aimed_count() - sum).abs() < 1e-6);
+        for (i, wi) in w.iter().enumerate() {
+            assert!((f64::from(set.aimed_pmf(i)) - wi / sum).abs() < 1e-6);
+        }
+        // Drawn: the aimed photons' lights follow those probabilities (χ² on 2 cells).
+        let accel = Accel::new(&[]);
+        let mut counts = [0usize; 2];
+        let mut flux = Vec::new();
+        let n = 200_000;
+        for i in 0..n {
+            let mut rng =
+                crate::sampling::Rng::stream(5, 1, i as u64, crate::sampling::Purpose::Photon);
+            if let Some((_, _, li)) = set.emit_into(&tris, &accel, n, true, &mut rng, &mut flux) {
+                counts[li] += 1;
+            }
+        }
+        let drawn = (counts[0] + counts[1]) as f64;
+        let chi2: f64 = (0..2)
+            .map(|i| {
+                let e = drawn * f64::from(set.aimed_pmf(i));
+                (counts[i] as f64 - e).powi(2) / e
+            })
+            .sum();
+        assert!(chi2 < 10.8, "χ² {chi2} (1 dof, p = 0.001): {counts:?}");
     }
 
     #[test]

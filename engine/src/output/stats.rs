@@ -45,7 +45,7 @@ pub struct PhotonStats {
     /// Photons emitted for the caustic map only (`--caustic-factor`).
     #[serde(default)]
     pub caustic_emitted: u64,
-    /// Whether point, spot and sun lights aimed those photons at the glass and mirrors.
+    /// Whether lights aimed those photons at the glass and mirrors.
     #[serde(default)]
     pub caustic_aimed: bool,
     pub stored_global: u64,

@@ -18,6 +18,7 @@ use rayon::prelude::*;
 
 use super::map::{PhotonBatch, PhotonMap};
 use super::record::Record;
+use crate::lights::LightSet;
 use crate::materials::{
     dielectric_bounce, metal_bounce, russian_roulette, russian_roulette_metal,
     russian_roulette_scalar, russian_roulette_single,
@@ -96,45 +97,77 @@ struct Role {
     aimed: bool,
     /// Photons its emitted flux is shared among (`photons`, or all caustic photons).
     emitted_among: usize,
-    /// Factor from its flux to its caustic record's flux.
-    caustic_scale: f32,
 }
 
-/// The caustic-only photon count and the two roles when lights aim their caustic-only
-/// photons at the specular target, `share` of whose unaimed photons would head into it
-/// ([`crate::lights::LightSet::aimed_share`]). The caustic map is then a fixed blend of
-/// two unbiased estimates: the global photons' caustic records at weight α, the aimed
-/// photons' at 1 − α. α = P·s / (P·s + M) (P global photons, s the share, M aimed ones)
-/// is the balance heuristic's weight in expectation: a global photon's caustic record
-/// then carries the flux an aimed one does, so neither makes speckles of the other.
-///
-/// M = (factor − 1)·P·√s: aimed photons all head for the glass, and each one that
-/// reaches it costs the split, the trace through it and the estimates where it lands,
-/// so the count is cut between the unaimed photons' useful number ((factor − 1)·P·s,
-/// the same cost) and their whole number (the same count) — their geometric mean.
-fn aimed_roles(photons: usize, factor: usize, share: f32) -> (usize, Role, Role) {
-    let share = f64::from(share).clamp(1e-12, 1.0);
-    let extra = (photons as f64) * (factor.saturating_sub(1) as f64);
-    let aimed = (extra * share.sqrt()).ceil().min(extra) as usize;
-    let useful_global = photons as f64 * share;
-    let alpha = if aimed == 0 {
-        1.0
-    } else {
-        useful_global / (useful_global + aimed as f64)
-    };
+/// The caustic-only photon count, the two roles and, per role and light, the factor
+/// from a photon's flux to its caustic record's flux.
+type Roles = (usize, [Role; 2], [Vec<f32>; 2]);
+
+/// Unaimed: every caustic photon, global or caustic-only, is one of `factor` × P photons
+/// of the same emission, and its caustic record carries that share of the flux.
+fn unaimed_roles(photons: usize, factor: usize, lights: usize) -> Roles {
+    let caustic_photons = photons.saturating_mul(factor);
     let global = Role {
         global: true,
         aimed: false,
         emitted_among: photons,
-        caustic_scale: alpha as f32,
+    };
+    let caustic = Role {
+        global: false,
+        aimed: false,
+        emitted_among: caustic_photons,
+    };
+    let scales = [vec![1.0 / factor as f32; lights], vec![1.0; lights]];
+    (caustic_photons, [global, caustic], scales)
+}
+
+/// The caustic-only photon count and the two roles when lights aim their caustic-only
+/// photons at the specular target (see [`crate::lights::LightSet::aim_at`]). Per light,
+/// the caustic map is then a fixed blend of two unbiased estimates: the global photons'
+/// caustic records at weight α, the aimed photons' at 1 − α. For a light of emit pmf p,
+/// share s (of its unaimed photons that would head into the target) and aimed pmf q,
+/// α = P·p·s / (P·p·s + M·q) (P global photons, M aimed ones) is the balance
+/// heuristic's weight in expectation: a global photon's caustic record then carries the
+/// flux an aimed one does, so neither makes speckles of the other. A light that does not
+/// aim (s = 1) gets the unaimed blend, α = 1 / factor.
+///
+/// M = (factor − 1)·P·Σ p·√s, shared among lights by q ∝ p·√s: aimed photons all head for
+/// the glass, and each one that reaches it costs the split, the trace through it and the
+/// estimates where it lands, so each light's count is cut between its unaimed photons'
+/// useful number ((factor − 1)·P·p·s, the same cost) and their whole number (the same
+/// count) — their geometric mean.
+fn aimed_roles(photons: usize, factor: usize, lights: &LightSet) -> Roles {
+    let extra = (photons as f64) * (factor.saturating_sub(1) as f64);
+    let aimed = (extra * lights.aimed_count().clamp(1e-6, 1.0))
+        .ceil()
+        .min(extra) as usize;
+    let alpha: Vec<f64> = (0..lights.len())
+        .map(|i| {
+            let share = f64::from(lights.share(i)).clamp(1e-12, 1.0);
+            let useful_global = photons as f64 * f64::from(lights.emit_pmf(i)) * share;
+            let aimed_here = aimed as f64 * f64::from(lights.aimed_pmf(i));
+            if aimed_here > 0.0 {
+                useful_global / (useful_global + aimed_here)
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let global = Role {
+        global: true,
+        aimed: false,
+        emitted_among: photons,
     };
     let caustic = Role {
         global: false,
         aimed: true,
         emitted_among: aimed.max(1),
-        caustic_scale: (1.0 - alpha) as f32,
     };
-    (photons.saturating_add(aimed), global, caustic)
+    let scales = [
+        alpha.iter().map(|&a| a as f32).collect(),
+        alpha.iter().map(|&a| (1.0 - a) as f32).collect(),
+    ];
+    (photons.saturating_add(aimed), [global, caustic], scales)
 }
 
 /// Traces `settings.photons` photons for pass `pass`.
@@ -152,23 +185,10 @@ pub fn trace_photons(
         1
     };
     let aimed = caustic && factor > 1 && scene.lights.aims();
-    let (caustic_photons, global_role, caustic_role) = if aimed {
-        aimed_roles(settings.photons, factor, scene.lights.aimed_share())
+    let (caustic_photons, roles, caustic_scales) = if aimed {
+        aimed_roles(settings.photons, factor, &scene.lights)
     } else {
-        let caustic_photons = settings.photons.saturating_mul(factor);
-        let global_role = Role {
-            global: true,
-            aimed: false,
-            emitted_among: settings.photons,
-            caustic_scale: 1.0 / factor as f32,
-        };
-        let caustic_role = Role {
-            global: false,
-            aimed: false,
-            emitted_among: caustic_photons,
-            caustic_scale: 1.0,
-        };
-        (caustic_photons, global_role, caustic_role)
+        unaimed_roles(settings.photons, factor, scene.lights.len())
     };
     let chunks = caustic_photons.div_ceil(CHUNK);
     let used = AtomicUsize::new(0);
@@ -189,7 +209,8 @@ pub fn trace_photons(
                 scene,
                 settings,
                 caustic,
-                roles: [global_role, caustic_role],
+                roles,
+                caustic_scales: &caustic_scales,
                 seed,
                 pass,
             };
@@ -257,6 +278,8 @@ struct Chunk<'a> {
     caustic: bool,
     /// The global photons' role, then the caustic-only photons'.
     roles: [Role; 2],
+    /// Per role and light, the factor from a photon's flux to its caustic record's.
+    caustic_scales: &'a [Vec<f32>; 2],
     seed: u64,
     pass: u64,
 }
@@ -300,7 +323,8 @@ impl Chunk<'_> {
         let mut splits = 0;
         for i in ids {
             let mut rng = Rng::stream(self.seed, self.pass, i as u64, Purpose::Photon);
-            let role = self.roles[usize::from(i >= self.settings.photons)];
+            let r = usize::from(i >= self.settings.photons);
+            let role = (self.roles[r], &self.caustic_scales[r][..]);
             let maps = (&mut *global, &mut *caustics);
             let (scene, settings) = (self.scene, self.settings);
             splits += trace_one(scene, settings, self.caustic, role, &mut rng, maps, scratch);
@@ -315,7 +339,7 @@ fn trace_one(
     scene: &SpectralScene,
     settings: &PhotonSettings,
     caustic: bool,
-    role: Role,
+    (role, caustic_scales): (Role, &[f32]),
     rng: &mut Rng,
     (global, caustics): (&mut PhotonBatch, &mut PhotonBatch),
     scratch: &mut TraceScratch,
@@ -328,7 +352,7 @@ fn trace_one(
     } = scratch;
     let mut flux = spare.pop().unwrap_or_default();
     let among = role.emitted_among;
-    let Some((origin, dir)) =
+    let Some((origin, dir, light)) =
         scene
             .lights
             .emit_into(&scene.tris, &scene.accel, among, role.aimed, rng, &mut flux)
@@ -336,6 +360,7 @@ fn trace_one(
         spare.push(flux);
         return 0;
     };
+    let caustic_scale = caustic_scales[light];
     stack.push(Path {
         origin,
         dir,
@@ -377,13 +402,13 @@ fn trace_one(
                     };
                     if !role.global {
                         if caustic_path {
-                            store(caustics, role.caustic_scale);
+                            store(caustics, caustic_scale);
                         }
                         break;
                     }
                     store(global, 1.0);
                     if caustic_path {
-                        store(caustics, role.caustic_scale);
+                        store(caustics, caustic_scale);
                     }
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, texel);
                     let survives = match path.single {
@@ -556,17 +581,19 @@ mod tests {
                 caustic_factor: 4,
                 max_map_bytes: usize::MAX,
             };
-            let role = |global: bool| Role {
-                global,
-                aimed: false,
-                emitted_among: 2_000,
-                caustic_scale: 0.25,
+            // The prism's ceiling panel aims its caustic-only photons at the glass.
+            let (_, roles, scales) = if scene.lights.aims() {
+                aimed_roles(2_000, 4, &scene.lights)
+            } else {
+                unaimed_roles(2_000, 4, scene.lights.len())
             };
+            assert_eq!(scene.lights.aims(), name == "prism", "{name}");
             let chunk = Chunk {
                 scene: &scene,
                 settings: &settings,
                 caustic: scene.has_specular,
-                roles: [role(true), role(false)],
+                roles,
+                caustic_scales: &scales,
                 seed: 7,
                 pass: 3,
             };

@@ -162,7 +162,7 @@ impl SpectralScene {
         }
         let mut lights = LightSet::new(lights, &tris);
         if let Some(target) = specular_target(scene, &materials) {
-            lights.aim_at(target);
+            lights.aim_at(target, &tris);
         }
         Self {
             name: scene.name.clone(),
