@@ -1608,3 +1608,125 @@ fn aimed_caustic_photons_carry_the_caustic_flux_a_sun_point_spot_or_panel_sends_
         }
     }
 }
+
+#[test]
+fn glass_objects_apart_get_a_target_each_and_the_aimed_photons_carry_both_caustics() {
+    // Two clear panes (0.5 × 0.5, 0.2 thick, n = 1.5) 2.4 apart over a dark floor under a
+    // Sun straight above: the caustic map's flux is E·2A·T (T as in the test above). The
+    // specular triangles are grouped into one sphere per pane, so the aimed photons start
+    // on two small discs, not one that spans both panes; a single pane (and a finely cut
+    // sphere) stays one target; every specular vertex lies inside a target.
+    use prismap_engine::photon::{PhotonSettings, trace_photons};
+    use prismap_engine::scene::SpectralScene;
+    use prismap_engine::spectral::BinGrid;
+    let (n, a, e) = (1.5f64, 0.5f32, 10.0f64);
+    let f = ((n - 1.0) / (n + 1.0)).powi(2);
+    let t_slab = (1.0 - f) / (1.0 + f);
+    let (top, half) = (0.8f32, 0.5 * a);
+    let pane = |x: f32| {
+        box_triangles(
+            Vec3::new(x - half, top - 0.2, -half),
+            Vec3::new(x + half, top, half),
+            false,
+        )
+    };
+    // A UV sphere of 20 × 40 flat triangles.
+    let ball = {
+        let pt = |i: usize, j: usize| {
+            let (t, p) = (
+                std::f32::consts::PI * i as f32 / 20.0,
+                std::f32::consts::TAU * j as f32 / 40.0,
+            );
+            Vec3::new(t.sin() * p.cos(), 0.5 + t.cos(), t.sin() * p.sin()) * 0.3
+        };
+        let mut tris = Vec::new();
+        for i in 0..20 {
+            for j in 0..40 {
+                tris.push([pt(i, j), pt(i + 1, j), pt(i + 1, j + 1)]);
+                tris.push([pt(i, j), pt(i + 1, j + 1), pt(i, j + 1)]);
+            }
+        }
+        tris
+    };
+    let grid = BinGrid::with_bins(4).unwrap();
+    let scene_of = |objects: Vec<Vec<[Vec3; 3]>>| {
+        let mut b = Builder::new();
+        b.add(floor_4x4(), diffuse(0.02), None);
+        let mut specular = Vec::new();
+        for o in objects {
+            specular.extend(o.iter().flatten().copied());
+            b.add(o, glass(n), None);
+        }
+        let mut scene = b.scene(
+            "panes",
+            Camera::look_at(Vec3::new(0.0, 0.4, 0.01), Vec3::ZERO, Vec3::Y, 1.2),
+        );
+        scene.lights.push(sun(-Vec3::Y, e));
+        let spectral = SpectralScene::new(&scene, grid.clone());
+        for v in &specular {
+            assert!(
+                spectral
+                    .lights
+                    .targets()
+                    .iter()
+                    .any(|t| v.distance(t.center) <= t.radius),
+                "{v} lies outside every target: {:?}",
+                spectral.lights.targets()
+            );
+        }
+        spectral
+    };
+    assert_eq!(scene_of(vec![pane(0.0)]).lights.targets().len(), 1);
+    assert_eq!(scene_of(vec![ball]).lights.targets().len(), 1);
+    let spectral = scene_of(vec![pane(-1.2), pane(1.2)]);
+    let targets = spectral.lights.targets();
+    assert_eq!(targets.len(), 2, "{targets:?}");
+    assert!(targets.iter().all(|t| t.radius < 0.4), "{targets:?}");
+    let settings = PhotonSettings {
+        photons: 100_000,
+        record: Storage::Full.record(),
+        max_bounces: 1024,
+        dispersion_split: 4,
+        caustic_map: true,
+        caustic_factor: 4,
+        max_map_bytes: usize::MAX,
+    };
+    let pass = trace_photons(
+        &spectral,
+        &settings,
+        11,
+        1,
+        &std::sync::atomic::AtomicBool::new(false),
+    )
+    .unwrap();
+    let map = pass.caustic.unwrap();
+    let mut flux = vec![0.0; 4];
+    let (mut total, mut left) = (0.0f64, 0.0f64);
+    for i in 0..map.len() {
+        map.flux_of(&grid, i, &mut flux);
+        total += f64::from(flux[0]);
+        if map.positions()[i][0] < 0.0 {
+            left += f64::from(flux[0]);
+        }
+    }
+    let exact = f64::from(spectral.lights.spectrum(0)[0]) * 2.0 * f64::from(a * a) * t_slab;
+    let rel = total / exact - 1.0;
+    println!(
+        "{} aimed photons, {} caustic records: flux {total:.5} (exact {exact:.5}, {rel:+.4}), {:.3} of it under the left pane",
+        pass.caustic_emitted,
+        map.len(),
+        left / total
+    );
+    assert!(rel.abs() < 0.015, "caustic flux {total} against {exact}");
+    assert!(
+        (left / total - 0.5).abs() < 0.02,
+        "left share {}",
+        left / total
+    );
+    assert!(
+        map.len() as f64 > 0.5 * pass.caustic_emitted as f64,
+        "{} caustic records from {} aimed photons",
+        map.len(),
+        pass.caustic_emitted
+    );
+}

@@ -53,31 +53,23 @@ pub struct Light {
     pub power: f32,
 }
 
-/// The sphere around every specular triangle, which caustic-only photons are aimed at.
+/// A sphere around some of the specular triangles; caustic-only photons are aimed at a
+/// few of them, which together hold every mirror and glass triangle.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Target {
     pub center: Vec3,
     pub radius: f32,
 }
 
-/// How one light aims its caustic-only photons at the [`Target`], and the share of its
-/// unaimed photons that would have headed into it.
+/// Most targets a scene's specular triangles are grouped into.
+pub const MAX_TARGETS: usize = 8;
+
+/// That a light aims its caustic-only photons at the targets, and the share of its
+/// unaimed photons that would have headed into them (0 for an area light that faces
+/// away from every target: none of its photons can start a caustic path).
 #[derive(Clone, Copy, Debug)]
 struct Aim {
-    kind: AimKind,
     share: f32,
-}
-
-#[derive(Clone, Copy, Debug)]
-enum AimKind {
-    /// Directions in the cone about `axis` with 1 − cos of its half-angle `omc`.
-    Cone { axis: Vec3, omc: f32 },
-    /// Starts on the disc of `radius` about `center`, on the light's start plane.
-    Disc { center: Vec3, radius: f32 },
-    /// Aimed photon by photon at the target itself: an area light's, from the point it
-    /// leaves (into the target's cone from there), and the sky's, along the direction it
-    /// arrives from (from the target's shadow disc on its start plane).
-    Target(Target),
 }
 
 /// The cone from `position` that holds `target`: its axis and 1 − cos of its half-angle;
@@ -95,68 +87,153 @@ fn cone_to(target: Target, position: Vec3) -> Option<(Vec3, f32)> {
     (omc > 0.0).then_some((to / d, omc))
 }
 
+/// Where a target lies against an emissive triangle's plane.
+enum Side {
+    /// Wholly in front, by more than its radius.
+    Front,
+    /// Wholly behind: no photon of the triangle can reach it.
+    Behind,
+    /// Cut by the plane (or touching it).
+    Across,
+}
+
+fn side_of(t: &TriData, target: Target) -> Side {
+    let d = t.normal.dot(target.center - t.v0);
+    if d > target.radius * 1.001 {
+        Side::Front
+    } else if d < -target.radius * 1.001 {
+        Side::Behind
+    } else {
+        Side::Across
+    }
+}
+
+/// The cones from `position` to each of `targets` (skipping those `keep` rejects) into
+/// `out`: how many, or None where `position` is inside one.
+#[inline]
+fn cones_to(
+    targets: &[Target],
+    position: Vec3,
+    keep: impl Fn(Target) -> bool,
+    out: &mut [(Vec3, f32); MAX_TARGETS],
+) -> Option<usize> {
+    let mut n = 0;
+    for &t in targets.iter().take(MAX_TARGETS) {
+        if keep(t) {
+            out[n] = cone_to(t, position)?;
+            n += 1;
+        }
+    }
+    Some(n)
+}
+
+/// Picks one of `n` pieces in proportion to `weight` (one draw, only where there are
+/// several); returns it and the weights' sum.
+#[inline]
+fn pick(n: usize, weight: impl Fn(usize) -> f32, rng: &mut Rng) -> (usize, f32) {
+    let total: f32 = (0..n).map(&weight).sum();
+    if n <= 1 {
+        return (0, total);
+    }
+    let mut u = rng.next_f32() * total;
+    for j in 0..n - 1 {
+        let w = weight(j);
+        if u < w {
+            return (j, total);
+        }
+        u -= w;
+    }
+    (n - 1, total)
+}
+
+/// A uniform direction in the union of `cones` (picked by solid angle, then uniform in
+/// the one picked) and its weight, the union's solid angle as the sampling saw it: Σ Ω
+/// over the cones that hold the direction.
+#[inline]
+fn sample_cones(cones: &[(Vec3, f32)], rng: &mut Rng) -> (Vec3, f32) {
+    use std::f32::consts::PI;
+    let (j, total) = pick(cones.len(), |k| cones[k].1, rng);
+    let (axis, omc) = cones[j];
+    let dir = uniform_cone(axis, omc, rng.next_2d());
+    let holding = 1 + cones
+        .iter()
+        .enumerate()
+        .filter(|&(k, &(a, o))| k != j && one_minus_cos_between(dir, a) <= o)
+        .count();
+    (dir, 2.0 * PI * total / holding as f32)
+}
+
+/// A uniform start point, on the plane through `plane` facing `dir`, in the union of the
+/// targets' shadow discs (picked by area, then uniform in the one picked), and its
+/// weight: the union's area as the sampling saw it.
+#[inline]
+fn sample_discs(targets: &[Target], dir: Vec3, plane: Vec3, rng: &mut Rng) -> (Vec3, f32) {
+    use std::f32::consts::PI;
+    let n = targets.len().min(MAX_TARGETS);
+    let on_plane = |t: Target| t.center - dir * dir.dot(t.center - plane);
+    let (j, total) = pick(n, |k| targets[k].radius * targets[k].radius, rng);
+    let origin = on_plane(targets[j]) + disc_point(dir, targets[j].radius, rng.next_2d());
+    let holding = 1
+        + (0..n)
+            .filter(|&k| {
+                k != j
+                    && (origin - on_plane(targets[k])).length_squared()
+                        <= targets[k].radius * targets[k].radius
+            })
+            .count();
+    (origin, PI * total / holding as f32)
+}
+
 impl Aim {
-    /// How `light` aims at `target`; None where aiming would not narrow its emission.
-    fn of(light: &Light, tris: &[TriData], target: Target) -> Option<Self> {
-        let cone_from = |position: Vec3| cone_to(target, position);
-        let (kind, share) = match light.kind {
+    /// Whether and how much `light` aims at `targets`; None where aiming would not narrow
+    /// its emission.
+    fn of(light: &Light, tris: &[TriData], targets: &[Target]) -> Option<Self> {
+        let mut cones = [(Vec3::ZERO, 0.0); MAX_TARGETS];
+        let all = |_: Target| true;
+        let share = match light.kind {
             LightKind::Point { position } => {
-                let (axis, omc) = cone_from(position)?;
-                (AimKind::Cone { axis, omc }, 0.5 * omc)
+                let n = cones_to(targets, position, all, &mut cones)?;
+                cones[..n].iter().map(|c| 0.5 * c.1).sum::<f32>()
             }
             LightKind::Spot {
                 position,
                 omc_outer,
                 ..
             } => {
-                let (axis, omc) = cone_from(position)?;
-                if omc >= omc_outer {
-                    return None;
-                }
-                (AimKind::Cone { axis, omc }, omc / omc_outer)
+                let n = cones_to(targets, position, all, &mut cones)?;
+                cones[..n].iter().map(|c| c.1).sum::<f32>() / omc_outer
             }
-            LightKind::Distant {
-                dir,
-                center,
-                radius,
-            } => {
-                if !(target.radius < radius) {
+            LightKind::Distant { radius, .. } | LightKind::Environment { radius, .. } => {
+                if !targets.iter().all(|t| t.radius < radius) {
                     return None;
                 }
-                // The start plane of the unaimed photons (one radius behind the scene
-                // sphere's centre, facing `dir`), under the target's centre.
-                let along = dir.dot(target.center - center) + radius;
-                let center = target.center - dir * along;
-                let share = (target.radius / radius).powi(2);
-                (
-                    AimKind::Disc {
-                        center,
-                        radius: target.radius,
-                    },
-                    share,
-                )
+                targets
+                    .iter()
+                    .map(|t| (t.radius / radius).powi(2))
+                    .sum::<f32>()
             }
             LightKind::Area { tri } => {
-                // Only a triangle whose plane keeps the whole sphere in front of it, so
-                // that every point of it sees the sphere from outside.
+                // Only a triangle whose plane keeps each target wholly in front of it or
+                // wholly behind, so that every point of it sees the ones in front from
+                // outside; those behind it cannot receive its light.
                 let t = tris.get(tri as usize)?;
-                if !(t.normal.dot(target.center - t.v0) > target.radius * 1.001) {
+                if targets
+                    .iter()
+                    .any(|&g| matches!(side_of(t, g), Side::Across))
+                {
                     return None;
                 }
-                // The share of its cosine-weighted photons into the cone from its
-                // centroid: the cone's projected solid angle over π, sin²θ·cos γ.
-                let (axis, omc) = cone_from(t.v0 + (t.e1 + t.e2) / 3.0)?;
-                let share = omc * (2.0 - omc) * axis.dot(t.normal);
-                (AimKind::Target(target), share)
-            }
-            LightKind::Environment { radius, .. } => {
-                if !(target.radius < radius) {
-                    return None;
-                }
-                (AimKind::Target(target), (target.radius / radius).powi(2))
+                let front = |g: Target| matches!(side_of(t, g), Side::Front);
+                let n = cones_to(targets, t.v0 + (t.e1 + t.e2) / 3.0, front, &mut cones)?;
+                // The share of its cosine-weighted photons into the cones from its
+                // centroid: each cone's projected solid angle over π, sin²θ·cos γ.
+                cones[..n]
+                    .iter()
+                    .map(|&(axis, omc)| omc * (2.0 - omc) * axis.dot(t.normal).max(0.0))
+                    .sum::<f32>()
             }
         };
-        (share.is_finite() && share > 0.0 && share < 1.0).then_some(Self { kind, share })
+        (0.0..1.0).contains(&share).then_some(Self { share })
     }
 }
 
@@ -173,8 +250,10 @@ pub struct Emitted {
 /// still gets photons for its caustic) and direct lighting (by power).
 pub struct LightSet {
     lights: Vec<Light>,
-    /// Per light, how its caustic-only photons are aimed at the scene's [`Target`] (see
-    /// [`Self::aim_at`]); empty when nothing is aimed.
+    /// The spheres caustic-only photons are aimed at ([`Self::aim_at`]).
+    targets: Vec<Target>,
+    /// Per light, whether its caustic-only photons are aimed at the targets; empty when
+    /// nothing is aimed.
     aims: Vec<Option<Aim>>,
     /// Per light, the probability that an aimed caustic-only photon leaves it (emit pmf
     /// × √share, normalised; see [`Self::aimed_pmf`]); empty when nothing is aimed.
@@ -225,6 +304,7 @@ impl LightSet {
             .map(|l| (l.power as f64 / total) as f32)
             .collect();
         Self {
+            targets: Vec::new(),
             aims: Vec::new(),
             aimed_pmf: Vec::new(),
             aimed_cdf: Vec::new(),
@@ -249,27 +329,31 @@ impl LightSet {
         self.lights.iter()
     }
 
-    /// Aims the caustic-only photons at `target` (the sphere around every mirror and glass
-    /// triangle): a caustic path's first hit lies inside it, so a photon that misses it
-    /// cannot be a caustic photon. A point light then emits into the sphere's cone, a spot
-    /// into that cone where it is narrower than its own (directions outside the spot carry
-    /// its zero falloff), a distant light from the sphere's shadow disc on its start plane,
-    /// an area triangle into the cone from the point each photon leaves (where its plane
-    /// keeps the sphere in front of it), the sky along each direction from the sphere's
-    /// shadow disc. Each photon's weight is the sampled solid angle or area, so every aimed
-    /// light's caustic flux is unbiased. Lights inside the sphere emit as before.
+    /// Aims the caustic-only photons at `targets` (spheres that together hold every mirror
+    /// and glass triangle, at most [`MAX_TARGETS`]): a caustic path's first hit lies inside
+    /// one, so a photon that misses them all cannot be a caustic photon. A point light
+    /// then emits into the spheres' cones, a spot into those cones where they are narrower
+    /// than its own (directions outside the spot carry its zero falloff), a distant light
+    /// from the spheres' shadow discs on its start plane, an area triangle into the cones
+    /// from the point each photon leaves (where its plane keeps each sphere wholly in
+    /// front of it or behind), the sky along each direction from the spheres' shadow
+    /// discs. A cone or disc is picked by its solid angle or area, and each photon's
+    /// weight is the union's measure as the sampling saw it (Σ over the cones or discs
+    /// that hold the sample), so every aimed light's caustic flux is unbiased where they
+    /// overlap too. Lights inside a sphere emit as before.
     ///
-    /// Each light's share s (of its unaimed photons that would head into the sphere; 1 for
-    /// a light that does not aim) sets how many aimed photons it gets: in proportion to
-    /// emit pmf × √s ([`Self::aimed_pmf`]), the geometric mean of its unaimed photons'
+    /// Each light's share s (of its unaimed photons that would head into the spheres; 1
+    /// for a light that does not aim) sets how many aimed photons it gets: in proportion
+    /// to emit pmf × √s ([`Self::aimed_pmf`]), the geometric mean of its unaimed photons'
     /// useful count and whole count (see `photon::trace`).
-    pub fn aim_at(&mut self, target: Target, tris: &[TriData]) {
+    pub fn aim_at(&mut self, targets: &[Target], tris: &[TriData]) {
+        self.targets = targets.iter().copied().take(MAX_TARGETS).collect();
         self.aims = self
             .lights
             .iter()
-            .map(|l| Aim::of(l, tris, target))
+            .map(|l| Aim::of(l, tris, &self.targets))
             .collect();
-        if self.aims.iter().all(Option::is_none) {
+        if self.targets.is_empty() || self.aims.iter().all(Option::is_none) {
             self.aims.clear();
             return;
         }
@@ -284,6 +368,11 @@ impl LightSet {
         self.aimed_count = total.min(1.0);
         self.aimed_pmf = weights.iter().map(|w| (w / total) as f32).collect();
         self.aimed_cdf = cdf(&self.aimed_pmf);
+    }
+
+    /// The spheres caustic-only photons are aimed at (empty before [`Self::aim_at`]).
+    pub fn targets(&self) -> &[Target] {
+        &self.targets
     }
 
     /// Whether any light aims its caustic-only photons ([`Self::aim_at`]).
@@ -356,16 +445,13 @@ impl LightSet {
             return None;
         }
         let aim = if aimed { self.aims[li] } else { None };
+        let targets = &self.targets[..];
         let (origin, dir, weight) = match (light.kind, aim) {
-            (
-                LightKind::Point { position },
-                Some(Aim {
-                    kind: AimKind::Cone { axis, omc },
-                    ..
-                }),
-            ) => {
-                let dir = uniform_cone(axis, omc, rng.next_2d());
-                (position, dir, 2.0 * PI * omc)
+            (LightKind::Point { position }, Some(_)) => {
+                let mut cones = [(Vec3::ZERO, 0.0); MAX_TARGETS];
+                let n = cones_to(targets, position, |_| true, &mut cones)?;
+                let (dir, solid_angle) = sample_cones(&cones[..n], rng);
+                (position, dir, solid_angle)
             }
             (
                 LightKind::Spot {
@@ -374,63 +460,55 @@ impl LightSet {
                     omc_outer,
                     omc_inner,
                 },
-                Some(Aim {
-                    kind: AimKind::Cone { axis, omc },
-                    ..
-                }),
+                Some(_),
             ) => {
-                let dir = uniform_cone(axis, omc, rng.next_2d());
+                let mut cones = [(Vec3::ZERO, 0.0); MAX_TARGETS];
+                let n = cones_to(targets, position, |_| true, &mut cones)?;
+                let (dir, solid_angle) = sample_cones(&cones[..n], rng);
                 let falloff =
                     spot_falloff(one_minus_cos_between(dir, spot_axis), omc_outer, omc_inner);
                 if !(falloff > 0.0) {
                     return None;
                 }
-                (position, dir, 2.0 * PI * omc * falloff)
+                (position, dir, solid_angle * falloff)
             }
             (
-                LightKind::Distant { dir, .. },
-                Some(Aim {
-                    kind: AimKind::Disc { center, radius },
-                    ..
-                }),
+                LightKind::Distant {
+                    dir,
+                    center,
+                    radius,
+                },
+                Some(_),
             ) => {
-                let origin = center + disc_point(dir, radius, rng.next_2d());
-                (origin, dir, PI * radius * radius)
+                // The unaimed photons' start plane: one radius behind the scene sphere's
+                // centre, facing `dir`.
+                let (origin, area) = sample_discs(targets, dir, center - dir * radius, rng);
+                (origin, dir, area)
             }
-            (
-                LightKind::Area { tri },
-                Some(Aim {
-                    kind: AimKind::Target(target),
-                    ..
-                }),
-            ) => {
+            (LightKind::Area { tri }, Some(_)) => {
                 let t = &tris[tri as usize];
                 let (b1, b2) = uniform_triangle(rng.next_2d());
                 let p = t.v0 + t.e1 * b1 + t.e2 * b2;
-                let (axis, omc) = cone_to(target, p)?;
-                let dir = uniform_cone(axis, omc, rng.next_2d());
-                // Radiance × cos θ over the triangle and the cone (the cone's edge may dip
-                // below the triangle's horizon, where it emits nothing).
+                let mut cones = [(Vec3::ZERO, 0.0); MAX_TARGETS];
+                let front = |g: Target| matches!(side_of(t, g), Side::Front);
+                let n = cones_to(targets, p, front, &mut cones)?;
+                if n == 0 {
+                    return None;
+                }
+                let (dir, solid_angle) = sample_cones(&cones[..n], rng);
+                // Radiance × cos θ over the triangle and the cones (all in front of it).
                 let cos = dir.dot(t.normal);
                 if !(cos > 0.0) {
                     return None;
                 }
                 let origin = accel.offset(p, t.normal, dir);
-                (origin, dir, t.area * 2.0 * PI * omc * cos)
+                (origin, dir, t.area * solid_angle * cos)
             }
-            (
-                LightKind::Environment { center, radius },
-                Some(Aim {
-                    kind: AimKind::Target(target),
-                    ..
-                }),
-            ) => {
-                // As unaimed, but from the target's shadow disc on the start plane.
+            (LightKind::Environment { center, radius }, Some(_)) => {
+                // As unaimed, but from the spheres' shadow discs on the start plane.
                 let dir = uniform_sphere(rng.next_2d());
-                let along = dir.dot(target.center - center) + radius;
-                let origin =
-                    target.center - dir * along + disc_point(dir, target.radius, rng.next_2d());
-                (origin, dir, 4.0 * PI * PI * target.radius * target.radius)
+                let (origin, area) = sample_discs(targets, dir, center - dir * radius, rng);
+                (origin, dir, 4.0 * PI * area)
             }
             (kind, _) => Self::emit_unaimed(&kind, tris, accel, rng),
         };
@@ -688,10 +766,25 @@ mod tests {
             center: Vec3::new(0.4, -1.0, 0.3),
             radius: 0.25,
         };
-        let meets = |o: Vec3, d: Vec3| {
-            let oc = target.center - o;
-            let t = oc.dot(d);
-            t > 0.0 && (oc - d * t).length_squared() <= target.radius * target.radius * 1.0001
+        // Then three targets: the first, one behind it as the lights see it (their cones
+        // and discs overlap), and a small one up behind the area light's back.
+        let three = [
+            target,
+            Target {
+                center: Vec3::new(0.55, -1.4, 0.35),
+                radius: 0.2,
+            },
+            Target {
+                center: Vec3::new(0.0, 0.6, 0.0),
+                radius: 0.1,
+            },
+        ];
+        let meets = |targets: &[Target], o: Vec3, d: Vec3| {
+            targets.iter().any(|target| {
+                let oc = target.center - o;
+                let t = oc.dot(d);
+                t > 0.0 && (oc - d * t).length_squared() <= target.radius * target.radius * 1.0001
+            })
         };
         let spot = LightKind::Spot {
             position: Vec3::ZERO,
@@ -746,44 +839,54 @@ mod tests {
         ];
         let accel = Accel::new(&[]);
         let tris = [tri];
-        for (name, kind) in kinds {
+        for ((name, kind), targets) in kinds
+            .iter()
+            .flat_map(|k| [(k, &three[..1]), (k, &three[..])])
+        {
             let light = Light {
-                kind,
+                kind: *kind,
                 spectrum: vec![1.0],
                 power: 1.0,
             };
             let mut set = LightSet::new(vec![light], &tris);
-            set.aim_at(target, &tris);
+            set.aim_at(targets, &tris);
             assert!(set.aims(), "{name} should aim");
             let total = |aimed: bool, photons: usize| {
-                let (mut sum, mut met) = (0.0f64, 0usize);
+                let (mut sum, mut left, mut met) = (0.0f64, 0usize, 0usize);
                 let mut flux = Vec::new();
                 for i in 0..photons {
                     let mut rng = Rng::stream(3, 1, i as u64, Purpose::Photon);
                     if let Some((o, d, _)) =
                         set.emit_into(&tris, &accel, photons, aimed, &mut rng, &mut flux)
-                        && meets(o, d)
                     {
-                        sum += f64::from(flux[0]);
-                        met += 1;
+                        left += 1;
+                        if meets(targets, o, d) {
+                            sum += f64::from(flux[0]);
+                            met += 1;
+                        }
                     }
                 }
-                (sum, met)
+                (sum, left, met)
             };
             // 8 M unaimed photons put the reference within 0.3 % (1σ; 1.3 % of them meet
-            // the target from the point light, 0.5 % from the sky).
-            let (unaimed, _) = total(false, 8_000_000);
-            let (aimed, met) = total(true, 100_000);
+            // the first target from the point light, 0.5 % from the sky).
+            let (unaimed, _, _) = total(false, 8_000_000);
+            let (aimed, left, met) = total(true, 100_000);
             let rel = aimed / unaimed - 1.0;
             println!(
-                "{name}: into the target {unaimed:.5} unaimed, {aimed:.5} aimed ({rel:+.4}), {met} aimed photons met it, share {:.4}",
+                "{name}, {} targets: into them {unaimed:.5} unaimed, {aimed:.5} aimed ({rel:+.4}), {met} of {left} aimed photons met one, share {:.4}",
+                targets.len(),
                 set.share(0)
             );
             assert!(
                 rel.abs() < 0.01,
-                "{name}: aimed {aimed} against unaimed {unaimed}"
+                "{name}, {} targets: aimed {aimed} against unaimed {unaimed}",
+                targets.len()
             );
-            assert_eq!(met, 100_000, "{name}: aimed photons missed the target");
+            // Every photon that leaves meets a target; only the spot's, aimed where its
+            // falloff is zero, do not leave.
+            assert_eq!(met, left, "{name}: aimed photons missed the targets");
+            assert!(*name == "spot" || left == 100_000, "{name}: {left} left");
         }
     }
 
@@ -821,7 +924,7 @@ mod tests {
         ];
         let tris = [tri];
         let mut set = LightSet::new(lights, &tris);
-        set.aim_at(target, &tris);
+        set.aim_at(&[target], &tris);
         assert!(set.aims());
         let s = set.share(0);
         assert!(s > 0.0 && s < 0.01, "the point light's share {s}");

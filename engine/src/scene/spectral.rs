@@ -7,7 +7,7 @@ use glam::Vec3;
 use super::texture::TextureRef;
 use super::{Material, MaterialKind, PunctualKind, PunctualLight, Scene};
 use crate::geometry::{Accel, SurfaceHit, TriData, triangle_normal};
-use crate::lights::{Light, LightKind, LightSet, Target};
+use crate::lights::{Light, LightKind, LightSet, MAX_TARGETS, Target};
 use crate::photon::record::{NormalCode, oct_encode};
 use crate::sampling::one_minus_cos;
 use crate::spectral::{BinGrid, Role, Spectrum, Transport, spd};
@@ -161,9 +161,7 @@ impl SpectralScene {
             accel.set_cutouts(&holed, std::sync::Arc::new(cutouts));
         }
         let mut lights = LightSet::new(lights, &tris);
-        if let Some(target) = specular_target(scene, &materials) {
-            lights.aim_at(target, &tris);
-        }
+        lights.aim_at(&specular_targets(scene, &materials), &tris);
         Self {
             name: scene.name.clone(),
             accel,
@@ -703,34 +701,98 @@ fn triangles_and_area_lights(
     (tris, lights, diffuse_area)
 }
 
-/// The sphere around every mirror and glass triangle (the centre of their box, the
-/// farthest vertex from it, a little larger): None when there is none.
-fn specular_target(scene: &Scene, materials: &[SMaterial]) -> Option<Target> {
+/// Spheres around the mirror and glass triangles, at most [`MAX_TARGETS`], that together
+/// hold every one: empty when there is none. They start as one group; the group with the
+/// largest sphere is split at the widest gap between its triangles' centroids along an
+/// axis, where the two spheres' r² sum to under 0.9 of its own (the r² a distant light's
+/// or a far lamp's aimed photons spread over): glass objects apart from each other get a
+/// sphere each, while a ball, a box or a square mirror stays one sphere (its halves'
+/// spheres hold 1.25–2.5 times its r²).
+fn specular_targets(scene: &Scene, materials: &[SMaterial]) -> Vec<Target> {
     let specular = |m: u32| {
         materials
             .get(m as usize)
             .is_some_and(|m| !matches!(m.kind, SurfaceKind::Diffuse { .. }))
     };
-    let tris = || {
-        scene
-            .triangles
+    let tris: Vec<[Vec3; 3]> = scene
+        .triangles
+        .iter()
+        .zip(&scene.triangle_material)
+        .filter(|(t, m)| specular(**m) && t.iter().all(|v| v.is_finite()))
+        .map(|(t, _)| *t)
+        .collect();
+    if tris.is_empty() {
+        return Vec::new();
+    }
+    let sphere = |group: &[usize]| {
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for v in group.iter().flat_map(|&i| &tris[i]) {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
+        }
+        let center = 0.5 * (lo + hi);
+        let radius = group
             .iter()
-            .zip(&scene.triangle_material)
-            .filter(|(_, m)| specular(**m))
-            .flat_map(|(t, _)| t.iter().copied())
+            .flat_map(|&i| &tris[i])
+            .map(|v| v.distance(center))
+            .fold(0.0f32, f32::max);
+        let radius = radius * 1.001 + 1e-5 * (1.0 + center.abs().max_element());
+        Target { center, radius }
     };
-    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    for v in tris() {
-        lo = lo.min(v);
-        hi = hi.max(v);
+    let centroids: Vec<Vec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
+    // (triangles, their sphere, whether a split was tried and refused)
+    let all: Vec<usize> = (0..tris.len()).collect();
+    let mut groups = vec![(sphere(&all), all, false)];
+    while groups.len() < MAX_TARGETS {
+        let Some(g) = (0..groups.len())
+            .filter(|&g| !groups[g].2)
+            .max_by(|&a, &b| groups[a].0.radius.total_cmp(&groups[b].0.radius))
+        else {
+            break;
+        };
+        let (target, group, _) = &groups[g];
+        let r2 = target.radius * target.radius;
+        let mut best: Option<(f32, Vec<usize>, Vec<usize>)> = None;
+        for axis in [0, 1, 2] {
+            // The widest gap between neighbouring centroids (of at most 4 096 of them).
+            let step = group.len().div_ceil(4096).max(1);
+            let mut keys: Vec<f32> = group
+                .iter()
+                .step_by(step)
+                .map(|&i| centroids[i][axis])
+                .collect();
+            keys.sort_unstable_by(f32::total_cmp);
+            let Some(cut) = keys
+                .windows(2)
+                .max_by(|a, b| (a[1] - a[0]).total_cmp(&(b[1] - b[0])))
+                .filter(|w| w[1] > w[0])
+                .map(|w| 0.5 * (w[0] + w[1]))
+            else {
+                continue;
+            };
+            let (below, above): (Vec<usize>, Vec<usize>) =
+                group.iter().partition(|&&i| centroids[i][axis] < cut);
+            if below.is_empty() || above.is_empty() {
+                continue;
+            }
+            let cost = sphere(&below).radius.powi(2) + sphere(&above).radius.powi(2);
+            if cost < 0.9 * r2 && best.as_ref().is_none_or(|b| cost < b.0) {
+                best = Some((cost, below, above));
+            }
+        }
+        match best {
+            Some((_, below, above)) => {
+                groups[g] = (sphere(&below), below, false);
+                groups.push((sphere(&above), above, false));
+            }
+            None => groups[g].2 = true,
+        }
     }
-    if !(lo.is_finite() && hi.is_finite()) {
-        return None;
-    }
-    let center = 0.5 * (lo + hi);
-    let radius = tris().map(|v| v.distance(center)).fold(0.0f32, f32::max);
-    let radius = radius * 1.001 + 1e-5 * (1.0 + center.abs().max_element());
-    radius.is_finite().then_some(Target { center, radius })
+    groups
+        .into_iter()
+        .map(|(target, _, _)| target)
+        .filter(|t| t.center.is_finite() && t.radius.is_finite())
+        .collect()
 }
 
 /// A sphere around the bounds, a little larger so that photons from a distant light or
