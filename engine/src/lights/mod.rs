@@ -380,7 +380,7 @@ impl LightSet {
         !self.aims.is_empty()
     }
 
-    /// The share of light `i`'s unaimed photons that would head into the target (1 for a
+    /// The share of light `i`'s unaimed photons that would head into the targets (1 for a
     /// light that does not aim): how much denser its aimed photons are.
     pub fn share(&self, i: usize) -> f32 {
         self.aims.get(i).copied().flatten().map_or(1.0, |a| a.share)
@@ -419,7 +419,7 @@ impl LightSet {
     /// [`Self::emit`] with the flux written into `flux` (resized to the bins; no
     /// allocation once it has been): returns the photon's origin, direction and light.
     /// `aimed`: a caustic-only photon, from a light chosen by [`Self::aimed_pmf`] and aimed
-    /// at the target where that light aims ([`Self::aim_at`]).
+    /// at the targets where that light aims ([`Self::aim_at`]).
     pub fn emit_into(
         &self,
         tris: &[TriData],

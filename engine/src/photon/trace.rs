@@ -57,7 +57,7 @@ pub struct PhotonPass {
     pub emitted: u64,
     /// Photons emitted for the caustic map only (see [`PhotonSettings::caustic_factor`]).
     pub caustic_emitted: u64,
-    /// Whether the caustic-only photons were aimed at the specular target (see
+    /// Whether the caustic-only photons were aimed at the specular targets (see
     /// [`crate::lights::LightSet::aim_at`]).
     pub caustic_aimed: bool,
     pub splits: u64,
@@ -93,7 +93,7 @@ struct Role {
     /// Traced to the end of its path, stored at every diffuse hit (else: a caustic-only
     /// photon, ended at its first diffuse hit).
     global: bool,
-    /// Aimed at the scene's specular target (caustic-only photons, where lights aim).
+    /// Aimed at the scene's specular targets (caustic-only photons, where lights aim).
     aimed: bool,
     /// Photons its emitted flux is shared among (`photons`, or all caustic photons).
     emitted_among: usize,
@@ -122,10 +122,10 @@ fn unaimed_roles(photons: usize, factor: usize, lights: usize) -> Roles {
 }
 
 /// The caustic-only photon count and the two roles when lights aim their caustic-only
-/// photons at the specular target (see [`crate::lights::LightSet::aim_at`]). Per light,
+/// photons at the specular targets (see [`crate::lights::LightSet::aim_at`]). Per light,
 /// the caustic map is then a fixed blend of two unbiased estimates: the global photons'
 /// caustic records at weight α, the aimed photons' at 1 − α. For a light of emit pmf p,
-/// share s (of its unaimed photons that would head into the target) and aimed pmf q,
+/// share s (of its unaimed photons that would head into the targets) and aimed pmf q,
 /// α = P·p·s / (P·p·s + M·q) (P global photons, M aimed ones) is the balance
 /// heuristic's weight in expectation: a global photon's caustic record then carries the
 /// flux an aimed one does, so neither makes speckles of the other. A light that does not

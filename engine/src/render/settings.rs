@@ -57,8 +57,8 @@ pub struct RenderSettings {
     /// sampled this many times more densely for little more than one ray per photon that
     /// misses the glass. Ignored where the scene has no mirror or glass.
     ///
-    /// Lights aim the extra photons at the sphere around the scene's mirrors and glass
-    /// (see [`crate::lights::LightSet::aim_at`]): where that sphere is a share s of what a
+    /// Lights aim the extra photons at the spheres around the scene's mirrors and glass
+    /// (see [`crate::lights::LightSet::aim_at`]): where those are a share s of what a
     /// light lights, it sends (factor − 1)·√s as many photons per `photons_per_pass`,
     /// every one heading for the glass, so its caustic is 1/√s times as dense at about the
     /// unaimed pass's cost. The estimate still
