@@ -833,3 +833,25 @@ fn a_new_pass_wakes_the_window_for_one_frame_and_an_idle_viewer_paints_none() {
         );
     }
 }
+
+#[test]
+fn the_statistics_say_when_caustic_photons_are_aimed_at_the_glass() {
+    // The prism's ceiling panel aims its caustic-only photons at the glass: the panel reads
+    // "+ aimed at glass" with the pass's extra photons; the Cornell box has no glass, so
+    // neither row.
+    let mut h = harness("prism");
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    h.key_press(egui::Key::Space);
+    h.run_steps(4);
+    let st = h.state().snapshot.clone().unwrap().stats;
+    assert!(st.caustic_photons_aimed, "the prism aims");
+    assert!(st.caustic_photons_emitted > 0);
+    h.get_by_label("+ aimed at glass");
+    h.get_by_label(&st.caustic_photons_emitted.to_string());
+    assert!(h.query_by_label("+ for caustics").is_none());
+    let mut h = harness("cornell-box");
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    h.step();
+    assert!(h.query_by_label("+ aimed at glass").is_none());
+    assert!(h.query_by_label("+ for caustics").is_none());
+}
