@@ -423,3 +423,67 @@ fn photon_maps_never_exceed_the_budget_and_photons_adapt() {
             .contains("--photon-budget")
     );
 }
+
+#[test]
+fn aim_targets_cover_coincident_degenerate_far_and_scattered_glass() {
+    // The prism plus hard specular geometry: 5 000 triangles collapsed onto one point, a
+    // collinear sliver 40 m away, and twenty small glass tetrahedra in a row. The aim
+    // targets stay at most 8 finite spheres that hold every specular vertex, and a pass
+    // renders finite pixels with its caustic-only photons aimed.
+    let mut s = scene::load_builtin("prism").unwrap();
+    let glass = s
+        .materials
+        .iter()
+        .position(|m| matches!(m.kind, MaterialKind::Dielectric { .. }))
+        .unwrap() as u32;
+    let mut add = |t: [Vec3; 3]| {
+        s.triangles.push(t);
+        s.triangle_material.push(glass);
+    };
+    let p = Vec3::new(0.5, 0.05, 0.5);
+    for _ in 0..5_000 {
+        add([p, p, p]);
+    }
+    add([
+        Vec3::new(40.0, 0.1, 0.0),
+        Vec3::new(40.5, 0.1, 0.0),
+        Vec3::new(41.0, 0.1, 0.0),
+    ]);
+    for i in 0..20 {
+        let o = Vec3::new(-1.0 + 0.1 * i as f32, 0.02, -0.6);
+        let (a, b, c, d) = (
+            o,
+            o + 0.03 * Vec3::X,
+            o + 0.03 * Vec3::Z,
+            o + 0.03 * Vec3::Y,
+        );
+        for t in [[a, c, b], [a, b, d], [b, c, d], [c, a, d]] {
+            add(t);
+        }
+    }
+    let spectral = scene::SpectralScene::new(&s, BinGrid::with_bins(8).unwrap());
+    let targets = spectral.lights.targets();
+    println!("{} targets: {targets:?}", targets.len());
+    assert!((1..=8).contains(&targets.len()), "{targets:?}");
+    for t in targets {
+        assert!(
+            t.center.is_finite() && t.radius.is_finite() && t.radius > 0.0,
+            "{t:?}"
+        );
+    }
+    for (tri, &m) in s.triangles.iter().zip(&s.triangle_material) {
+        if m == glass {
+            for v in tri {
+                assert!(
+                    targets.iter().any(|t| v.distance(t.center) <= t.radius),
+                    "{v} outside every target {targets:?}"
+                );
+            }
+        }
+    }
+    assert!(spectral.lights.aims(), "the ceiling panel aims");
+    let mut r = RenderSession::new(&s, small(Storage::Compact, 8)).unwrap();
+    r.run_pass().unwrap();
+    assert_eq!(r.film().dropped_samples(), 0);
+    assert!(r.stats().caustic_photons_aimed);
+}
