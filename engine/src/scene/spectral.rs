@@ -702,9 +702,9 @@ fn triangles_and_area_lights(
 }
 
 /// Spheres around the mirror and glass triangles, at most [`MAX_TARGETS`], that together
-/// hold every one: empty when there is none. They start as one group; the group with the
-/// largest sphere is split at the widest gap between its triangles' centroids along an
-/// axis, where the two spheres' r² sum to under 0.9 of its own (the r² a distant light's
+/// hold every one: empty when there is none. They start as one group; the group whose
+/// split saves the most r² is split at the widest gap between its triangles' centroids
+/// along an axis, where the two spheres' r² sum to under 0.9 of its own (the r² a distant light's
 /// or a far lamp's aimed photons spread over): glass objects apart from each other get a
 /// sphere each, while a ball, a box or a square mirror stays one sphere (its halves'
 /// spheres hold 1.25–2.5 times its r²).
@@ -740,21 +740,13 @@ fn specular_targets(scene: &Scene, materials: &[SMaterial]) -> Vec<Target> {
         Target { center, radius }
     };
     let centroids: Vec<Vec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
-    // (triangles, their sphere, whether a split was tried and refused)
-    let all: Vec<usize> = (0..tris.len()).collect();
-    let mut groups = vec![(sphere(&all), all, false)];
-    while groups.len() < MAX_TARGETS {
-        let Some(g) = (0..groups.len())
-            .filter(|&g| !groups[g].2)
-            .max_by(|&a, &b| groups[a].0.radius.total_cmp(&groups[b].0.radius))
-        else {
-            break;
-        };
-        let (target, group, _) = &groups[g];
+    // A group's best split: the widest gap between neighbouring centroids along an axis
+    // (among at most 4 096 of them), kept where the two spheres' r² sum to under 0.9 of
+    // the group's; returns its gain in r² and the two halves.
+    let best_split = |target: &Target, group: &[usize]| {
         let r2 = target.radius * target.radius;
         let mut best: Option<(f32, Vec<usize>, Vec<usize>)> = None;
         for axis in [0, 1, 2] {
-            // The widest gap between neighbouring centroids (of at most 4 096 of them).
             let step = group.len().div_ceil(4096).max(1);
             let mut keys: Vec<f32> = group
                 .iter()
@@ -776,17 +768,34 @@ fn specular_targets(scene: &Scene, materials: &[SMaterial]) -> Vec<Target> {
                 continue;
             }
             let cost = sphere(&below).radius.powi(2) + sphere(&above).radius.powi(2);
-            if cost < 0.9 * r2 && best.as_ref().is_none_or(|b| cost < b.0) {
-                best = Some((cost, below, above));
+            if cost < 0.9 * r2 && best.as_ref().is_none_or(|b| r2 - cost > b.0) {
+                best = Some((r2 - cost, below, above));
             }
         }
-        match best {
-            Some((_, below, above)) => {
-                groups[g] = (sphere(&below), below, false);
-                groups.push((sphere(&above), above, false));
-            }
-            None => groups[g].2 = true,
-        }
+        best
+    };
+    // (sphere, triangles, best split); the split that saves the most r² goes first.
+    let group_of = |group: Vec<usize>| {
+        let target = sphere(&group);
+        let split = best_split(&target, &group);
+        (target, group, split)
+    };
+    let mut groups = vec![group_of((0..tris.len()).collect())];
+    while groups.len() < MAX_TARGETS {
+        let Some(g) = (0..groups.len())
+            .filter(|&g| groups[g].2.is_some())
+            .max_by(|&a, &b| {
+                let gain = |g: usize| groups[g].2.as_ref().map_or(0.0, |s| s.0);
+                gain(a).total_cmp(&gain(b))
+            })
+        else {
+            break;
+        };
+        let Some((_, below, above)) = groups[g].2.take() else {
+            break;
+        };
+        groups[g] = group_of(below);
+        groups.push(group_of(above));
     }
     groups
         .into_iter()
