@@ -66,7 +66,7 @@ fn render_picks_the_bins_the_scene_needs_unless_told() {
 
 #[test]
 fn stats_say_where_caustic_photons_were_aimed_at_the_glass() {
-    // Blender's sun-lit glass ball and the prism's ceiling panel aim their caustic-only
+    // Blender's sun-lit glass ball and rough materials, and the prism's ceiling panel, aim their caustic-only
     // photons, and send fewer of them than the unaimed (factor − 1) × photons (the prism's
     // spot, narrower than its glass, keeps its whole share); the Cornell box has no glass.
     let dir = temp_dir("aimed");
@@ -74,9 +74,20 @@ fn stats_say_where_caustic_photons_were_aimed_at_the_glass() {
         env!("CARGO_MANIFEST_DIR"),
         "/scenes/blender/textured-glass.glb"
     );
-    for (i, (scene, aimed)) in [(blender, true), ("prism", true), ("cornell-box", false)]
-        .into_iter()
-        .enumerate()
+    let rough = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/blender/rough-materials.glb"
+    );
+    // (scene, aimed, spheres aimed at): rough-materials.glb's gold ball, frosted ball,
+    // green slab and mirror stand apart and get one each.
+    for (i, (scene, aimed, targets)) in [
+        (blender, true, 1),
+        (rough, true, 4),
+        ("prism", true, 1),
+        ("cornell-box", false, 0),
+    ]
+    .into_iter()
+    .enumerate()
     {
         let stats = dir.join(format!("{i}.json"));
         succeeds(
@@ -92,6 +103,7 @@ fn stats_say_where_caustic_photons_were_aimed_at_the_glass() {
             serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
         let photons = &s["photons"];
         assert_eq!(photons["caustic_aimed"], aimed, "{scene}: {photons}");
+        assert_eq!(photons["caustic_targets"], targets, "{scene}: {photons}");
         let extra = photons["caustic_emitted"].as_u64().unwrap();
         if aimed {
             assert!((1..6000).contains(&extra), "{scene}: {photons}");

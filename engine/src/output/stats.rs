@@ -48,6 +48,9 @@ pub struct PhotonStats {
     /// Whether lights aimed those photons at the glass and mirrors.
     #[serde(default)]
     pub caustic_aimed: bool,
+    /// How many spheres around the glass and mirrors they were aimed at (0: not aimed).
+    #[serde(default)]
+    pub caustic_targets: u32,
     pub stored_global: u64,
     pub stored_caustic: u64,
     pub spike_records: u64,
@@ -112,6 +115,7 @@ impl Stats {
                 emitted: st.photons_emitted,
                 caustic_emitted: st.caustic_photons_emitted,
                 caustic_aimed: st.caustic_photons_aimed,
+                caustic_targets: st.caustic_targets,
                 stored_global: st.stored_global,
                 stored_caustic: st.stored_caustic,
                 spike_records: st.spike_records,

@@ -104,6 +104,9 @@ pub struct RenderStats {
     pub caustic_photons_emitted: u64,
     /// Whether the latest pass aimed its caustic-only photons at the glass and mirrors.
     pub caustic_photons_aimed: bool,
+    /// The spheres around the glass and mirrors those photons were aimed at (0 when not
+    /// aimed; see [`crate::lights::LightSet::aim_at`]).
+    pub caustic_targets: u32,
     /// Photons stored in the latest pass's maps.
     pub stored_global: u64,
     pub stored_caustic: u64,
@@ -759,6 +762,11 @@ impl RenderSession {
         st.photons_emitted += maps.emitted;
         st.caustic_photons_emitted += maps.caustic_emitted;
         st.caustic_photons_aimed = maps.caustic_aimed;
+        st.caustic_targets = if maps.caustic_aimed {
+            self.scene.lights.targets().len() as u32
+        } else {
+            0
+        };
         st.stored_global = maps.global.len() as u64;
         st.stored_caustic = maps.caustic.as_ref().map_or(0, |c| c.len() as u64);
         st.spike_records = maps.global.spike_records() as u64
