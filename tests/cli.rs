@@ -66,9 +66,10 @@ fn render_picks_the_bins_the_scene_needs_unless_told() {
 
 #[test]
 fn stats_say_where_caustic_photons_were_aimed_at_the_glass() {
-    // Blender's sun-lit glass ball and rough materials, and the prism's ceiling panel, aim their caustic-only
-    // photons, and send fewer of them than the unaimed (factor − 1) × photons (the prism's
-    // spot, narrower than its glass, keeps its whole share); the Cornell box has no glass.
+    // Blender's sun-lit glass ball and rough materials, and the prism's ceiling panel, aim
+    // their caustic-only photons, and send fewer of them than the unaimed (factor − 1) ×
+    // photons (the prism's spot, narrower than its glass, keeps its whole share); the
+    // Cornell box has no glass.
     let dir = temp_dir("aimed");
     let blender = concat!(
         env!("CARGO_MANIFEST_DIR"),
