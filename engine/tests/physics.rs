@@ -1440,6 +1440,24 @@ fn a_normal_map_tilts_the_shading_normal_the_way_gltf_defines_it() {
     }
 }
 
+/// One photon pass of `photons` at caustic factor 4, full records (seed 11, pass 1).
+fn caustic_pass(
+    spectral: &prismap_engine::scene::SpectralScene,
+    photons: usize,
+) -> prismap_engine::photon::PhotonPass {
+    let settings = prismap_engine::photon::PhotonSettings {
+        photons,
+        record: Storage::Full.record(),
+        max_bounces: 1024,
+        dispersion_split: 4,
+        caustic_map: true,
+        caustic_factor: 4,
+        max_map_bytes: usize::MAX,
+    };
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    prismap_engine::photon::trace_photons(spectral, &settings, 11, 1, &cancel).unwrap()
+}
+
 #[test]
 fn aimed_caustic_photons_carry_the_caustic_flux_a_sun_point_spot_or_panel_sends_through_glass() {
     // A clear pane (0.5 × 0.5, 0.2 thick, n = 1.5) over a large dark floor, lit from
@@ -1457,7 +1475,6 @@ fn aimed_caustic_photons_carry_the_caustic_flux_a_sun_point_spot_or_panel_sends_
     // 0.35 % (lamps) and 0.9 % (panel) would; the map blends them with the global photons'
     // caustic records, and every record should carry about the same flux (a global
     // photon's record weighted as an aimed one, no speckles).
-    use prismap_engine::photon::{PhotonSettings, trace_photons};
     use prismap_engine::scene::{PunctualKind, PunctualLight, SpectralScene};
     use prismap_engine::spectral::BinGrid;
     let (n, a, h) = (1.5f64, 0.5f64, 3.0f64);
@@ -1492,11 +1509,27 @@ fn aimed_caustic_photons_carry_the_caustic_flux_a_sun_point_spot_or_panel_sends_
     // last lights the pane with the point light and the panel together, whose aimed
     // photons are shared between them and blended at each light's own weight.
     let point = || lamp("point", PunctualKind::Point);
+    // A hard-edged 3° spot lands wholly on the pane (3·tan 3° = 0.16 < 0.25) and is
+    // narrower than the pane's sphere seen from it (6.8°), so it does not aim: its extra
+    // photons take the unaimed blend (1/F each).
+    let narrow = PunctualKind::Spot {
+        direction: -Vec3::Y,
+        inner: 3f32.to_radians(),
+        outer: 3f32.to_radians(),
+    };
+    let narrow_omega = 2.0 * std::f64::consts::PI * (1.0 - 3f64.to_radians().cos());
     let cases = [
         ("sun", Some(sun(-Vec3::Y, 10.0)), false, a * a, 100_000),
         ("point", Some(point()), false, omega, 400_000),
         ("spot", Some(lamp("spot", spot)), false, omega, 200_000),
         ("panel", None, true, panel_flux / panel_radiance, 200_000),
+        (
+            "narrow spot",
+            Some(lamp("narrow spot", narrow)),
+            false,
+            narrow_omega,
+            100_000,
+        ),
         (
             "point + panel",
             Some(point()),
@@ -1537,24 +1570,12 @@ fn aimed_caustic_photons_carry_the_caustic_flux_a_sun_point_spot_or_panel_sends_
         );
         scene.lights.extend(light);
         let spectral = SpectralScene::new(&scene, grid.clone());
-        assert!(spectral.lights.aims(), "{name}: the light should aim");
-        let settings = PhotonSettings {
-            photons,
-            record: Storage::Full.record(),
-            max_bounces: 1024,
-            dispersion_split: 4,
-            caustic_map: true,
-            caustic_factor: 4,
-            max_map_bytes: usize::MAX,
-        };
-        let pass = trace_photons(
-            &spectral,
-            &settings,
-            11,
-            1,
-            &std::sync::atomic::AtomicBool::new(false),
-        )
-        .unwrap();
+        assert_eq!(
+            spectral.lights.aims(),
+            name != "narrow spot",
+            "{name}: whether the light aims"
+        );
+        let pass = caustic_pass(&spectral, photons);
         let map = pass.caustic.unwrap();
         let mut flux = vec![0.0; bins];
         let mut total = vec![0.0f64; bins];
@@ -1575,7 +1596,7 @@ fn aimed_caustic_photons_carry_the_caustic_flux_a_sun_point_spot_or_panel_sends_
         // Every light's spectrum is the same constant.
         let spectrum = spectral.lights.spectrum(0);
         println!(
-            "{name}: {} aimed photons, {} caustic records, largest record {:.2}× the median",
+            "{name}: {} extra photons, {} caustic records, largest record {:.2}× the median",
             pass.caustic_emitted,
             map.len(),
             largest / median
@@ -1616,7 +1637,6 @@ fn glass_objects_apart_get_a_target_each_and_the_aimed_photons_carry_both_causti
     // specular triangles are grouped into one sphere per pane, so the aimed photons start
     // on two small discs, not one that spans both panes; a single pane (and a finely cut
     // sphere) stays one target; every specular vertex lies inside a target.
-    use prismap_engine::photon::{PhotonSettings, trace_photons};
     use prismap_engine::scene::SpectralScene;
     use prismap_engine::spectral::BinGrid;
     let (n, a, e) = (1.5f64, 0.5f32, 10.0f64);
@@ -1682,23 +1702,7 @@ fn glass_objects_apart_get_a_target_each_and_the_aimed_photons_carry_both_causti
     let targets = spectral.lights.targets();
     assert_eq!(targets.len(), 2, "{targets:?}");
     assert!(targets.iter().all(|t| t.radius < 0.4), "{targets:?}");
-    let settings = PhotonSettings {
-        photons: 100_000,
-        record: Storage::Full.record(),
-        max_bounces: 1024,
-        dispersion_split: 4,
-        caustic_map: true,
-        caustic_factor: 4,
-        max_map_bytes: usize::MAX,
-    };
-    let pass = trace_photons(
-        &spectral,
-        &settings,
-        11,
-        1,
-        &std::sync::atomic::AtomicBool::new(false),
-    )
-    .unwrap();
+    let pass = caustic_pass(&spectral, 100_000);
     let map = pass.caustic.unwrap();
     let mut flux = vec![0.0; 4];
     let (mut total, mut left) = (0.0f64, 0.0f64);

@@ -70,7 +70,15 @@ pub const MAX_TARGETS: usize = 8;
 #[derive(Clone, Copy, Debug)]
 struct Aim {
     share: f32,
+    /// Bit k: target k lies in front of an area triangle (all set for other lights).
+    front: u8,
+    /// A point light's or spot's cones to the targets, fixed at [`LightSet::aim_at`]:
+    /// an index into [`LightSet`]'s `cones`.
+    cones: Option<u32>,
 }
+
+/// Cones to each target from one position: axis and 1 − cos of the half-angle.
+type Cones = [(Vec3, f32); MAX_TARGETS];
 
 /// The cone from `position` that holds `target`: its axis and 1 − cos of its half-angle;
 /// None from inside (or at the edge of) the sphere, where every direction may reach it.
@@ -108,18 +116,13 @@ fn side_of(t: &TriData, target: Target) -> Side {
     }
 }
 
-/// The cones from `position` to each of `targets` (skipping those `keep` rejects) into
+/// The cones from `position` to those of `targets` whose bit is set in `keep`, into
 /// `out`: how many, or None where `position` is inside one.
 #[inline]
-fn cones_to(
-    targets: &[Target],
-    position: Vec3,
-    keep: impl Fn(Target) -> bool,
-    out: &mut [(Vec3, f32); MAX_TARGETS],
-) -> Option<usize> {
+fn cones_to(targets: &[Target], position: Vec3, keep: u8, out: &mut Cones) -> Option<usize> {
     let mut n = 0;
-    for &t in targets.iter().take(MAX_TARGETS) {
-        if keep(t) {
+    for (k, &t) in targets.iter().take(MAX_TARGETS).enumerate() {
+        if keep & (1 << k) != 0 {
             out[n] = cone_to(t, position)?;
             n += 1;
         }
@@ -185,14 +188,17 @@ fn sample_discs(targets: &[Target], dir: Vec3, plane: Vec3, rng: &mut Rng) -> (V
 }
 
 impl Aim {
-    /// Whether and how much `light` aims at `targets`; None where aiming would not narrow
-    /// its emission.
-    fn of(light: &Light, tris: &[TriData], targets: &[Target]) -> Option<Self> {
+    /// Whether and how much `light` aims at `targets` (at most [`MAX_TARGETS`]), and a
+    /// point light's or spot's cones to them; None where aiming would not narrow its
+    /// emission.
+    fn of(light: &Light, tris: &[TriData], targets: &[Target]) -> Option<(Self, Option<Cones>)> {
         let mut cones = [(Vec3::ZERO, 0.0); MAX_TARGETS];
-        let all = |_: Target| true;
+        let all = u8::MAX;
+        let (mut front, mut fixed) = (all, false);
         let share = match light.kind {
             LightKind::Point { position } => {
                 let n = cones_to(targets, position, all, &mut cones)?;
+                fixed = true;
                 cones[..n].iter().map(|c| 0.5 * c.1).sum::<f32>()
             }
             LightKind::Spot {
@@ -201,6 +207,7 @@ impl Aim {
                 ..
             } => {
                 let n = cones_to(targets, position, all, &mut cones)?;
+                fixed = true;
                 cones[..n].iter().map(|c| c.1).sum::<f32>() / omc_outer
             }
             LightKind::Distant { radius, .. } | LightKind::Environment { radius, .. } => {
@@ -223,7 +230,11 @@ impl Aim {
                 {
                     return None;
                 }
-                let front = |g: Target| matches!(side_of(t, g), Side::Front);
+                front = targets
+                    .iter()
+                    .enumerate()
+                    .filter(|&(_, &g)| matches!(side_of(t, g), Side::Front))
+                    .fold(0u8, |m, (k, _)| m | 1 << k);
                 let n = cones_to(targets, t.v0 + (t.e1 + t.e2) / 3.0, front, &mut cones)?;
                 // The share of its cosine-weighted photons into the cones from its
                 // centroid: each cone's projected solid angle over π, sin²θ·cos γ.
@@ -233,7 +244,14 @@ impl Aim {
                     .sum::<f32>()
             }
         };
-        (0.0..1.0).contains(&share).then_some(Self { share })
+        let aim = Self {
+            share,
+            front,
+            cones: None,
+        };
+        (0.0..1.0)
+            .contains(&share)
+            .then_some((aim, fixed.then_some(cones)))
     }
 }
 
@@ -255,6 +273,8 @@ pub struct LightSet {
     /// Per light, whether its caustic-only photons are aimed at the targets; empty when
     /// nothing is aimed.
     aims: Vec<Option<Aim>>,
+    /// The point lights' and spots' cones to the targets (see [`Aim::cones`]).
+    cones: Vec<Cones>,
     /// Per light, the probability that an aimed caustic-only photon leaves it (emit pmf
     /// × √share, normalised; see [`Self::aimed_pmf`]); empty when nothing is aimed.
     aimed_pmf: Vec<f32>,
@@ -306,6 +326,7 @@ impl LightSet {
         Self {
             targets: Vec::new(),
             aims: Vec::new(),
+            cones: Vec::new(),
             aimed_pmf: Vec::new(),
             aimed_cdf: Vec::new(),
             aimed_count: 1.0,
@@ -348,11 +369,18 @@ impl LightSet {
     /// useful count and whole count (see `photon::trace`).
     pub fn aim_at(&mut self, targets: &[Target], tris: &[TriData]) {
         self.targets = targets.iter().copied().take(MAX_TARGETS).collect();
-        self.aims = self
-            .lights
-            .iter()
-            .map(|l| Aim::of(l, tris, &self.targets))
-            .collect();
+        self.cones.clear();
+        self.aims = Vec::with_capacity(self.lights.len());
+        for l in &self.lights {
+            let aim = Aim::of(l, tris, &self.targets).map(|(mut aim, cones)| {
+                if let Some(c) = cones {
+                    aim.cones = Some(self.cones.len() as u32);
+                    self.cones.push(c);
+                }
+                aim
+            });
+            self.aims.push(aim);
+        }
         if self.targets.is_empty() || self.aims.iter().all(Option::is_none) {
             self.aims.clear();
             return;
@@ -446,11 +474,10 @@ impl LightSet {
         }
         let aim = if aimed { self.aims[li] } else { None };
         let targets = &self.targets[..];
+        let fixed_cones = |aim: Aim| Some(&self.cones.get(aim.cones? as usize)?[..targets.len()]);
         let (origin, dir, weight) = match (light.kind, aim) {
-            (LightKind::Point { position }, Some(_)) => {
-                let mut cones = [(Vec3::ZERO, 0.0); MAX_TARGETS];
-                let n = cones_to(targets, position, |_| true, &mut cones)?;
-                let (dir, solid_angle) = sample_cones(&cones[..n], rng);
+            (LightKind::Point { position }, Some(aim)) => {
+                let (dir, solid_angle) = sample_cones(fixed_cones(aim)?, rng);
                 (position, dir, solid_angle)
             }
             (
@@ -460,11 +487,9 @@ impl LightSet {
                     omc_outer,
                     omc_inner,
                 },
-                Some(_),
+                Some(aim),
             ) => {
-                let mut cones = [(Vec3::ZERO, 0.0); MAX_TARGETS];
-                let n = cones_to(targets, position, |_| true, &mut cones)?;
-                let (dir, solid_angle) = sample_cones(&cones[..n], rng);
+                let (dir, solid_angle) = sample_cones(fixed_cones(aim)?, rng);
                 let falloff =
                     spot_falloff(one_minus_cos_between(dir, spot_axis), omc_outer, omc_inner);
                 if !(falloff > 0.0) {
@@ -485,13 +510,12 @@ impl LightSet {
                 let (origin, area) = sample_discs(targets, dir, center - dir * radius, rng);
                 (origin, dir, area)
             }
-            (LightKind::Area { tri }, Some(_)) => {
+            (LightKind::Area { tri }, Some(aim)) => {
                 let t = &tris[tri as usize];
                 let (b1, b2) = uniform_triangle(rng.next_2d());
                 let p = t.v0 + t.e1 * b1 + t.e2 * b2;
                 let mut cones = [(Vec3::ZERO, 0.0); MAX_TARGETS];
-                let front = |g: Target| matches!(side_of(t, g), Side::Front);
-                let n = cones_to(targets, p, front, &mut cones)?;
+                let n = cones_to(targets, p, aim.front, &mut cones)?;
                 if n == 0 {
                     return None;
                 }

@@ -103,40 +103,23 @@ struct Role {
 /// from a photon's flux to its caustic record's flux.
 type Roles = (usize, [Role; 2], [Vec<f32>; 2]);
 
-/// Unaimed: every caustic photon, global or caustic-only, is one of `factor` × P photons
-/// of the same emission, and its caustic record carries that share of the flux.
-fn unaimed_roles(photons: usize, factor: usize, lights: usize) -> Roles {
-    let caustic_photons = photons.saturating_mul(factor);
-    let global = Role {
-        global: true,
-        aimed: false,
-        emitted_among: photons,
-    };
-    let caustic = Role {
-        global: false,
-        aimed: false,
-        emitted_among: caustic_photons,
-    };
-    let scales = [vec![1.0 / factor as f32; lights], vec![1.0; lights]];
-    (caustic_photons, [global, caustic], scales)
-}
-
-/// The caustic-only photon count and the two roles when lights aim their caustic-only
-/// photons at the specular targets (see [`crate::lights::LightSet::aim_at`]). Per light,
+/// The caustic-only photon count and the two roles, where lights aim their caustic-only
+/// photons at the specular targets or not (see [`crate::lights::LightSet::aim_at`]). Per light,
 /// the caustic map is then a fixed blend of two unbiased estimates: the global photons'
 /// caustic records at weight α, the aimed photons' at 1 − α. For a light of emit pmf p,
 /// share s (of its unaimed photons that would head into the targets) and aimed pmf q,
 /// α = P·p·s / (P·p·s + M·q) (P global photons, M aimed ones) is the balance
 /// heuristic's weight in expectation: a global photon's caustic record then carries the
 /// flux an aimed one does, so neither makes speckles of the other. A light that does not
-/// aim (s = 1) gets the unaimed blend, α = 1 / factor.
+/// aim (s = 1, q = p) gets the unaimed blend, α = 1 / factor: each caustic record then
+/// carries the flux of one in factor × P photons.
 ///
 /// M = (factor − 1)·P·Σ p·√s, shared among lights by q ∝ p·√s: aimed photons all head for
 /// the glass, and each one that reaches it costs the split, the trace through it and the
 /// estimates where it lands, so each light's count is cut between its unaimed photons'
 /// useful number ((factor − 1)·P·p·s, the same cost) and their whole number (the same
 /// count) — their geometric mean.
-fn aimed_roles(photons: usize, factor: usize, lights: &LightSet) -> Roles {
+fn roles(photons: usize, factor: usize, lights: &LightSet) -> Roles {
     let extra = (photons as f64) * (factor.saturating_sub(1) as f64);
     let aimed = (extra * lights.aimed_count().clamp(1e-6, 1.0))
         .ceil()
@@ -160,7 +143,7 @@ fn aimed_roles(photons: usize, factor: usize, lights: &LightSet) -> Roles {
     };
     let caustic = Role {
         global: false,
-        aimed: true,
+        aimed: lights.aims(),
         emitted_among: aimed.max(1),
     };
     let scales = [
@@ -185,11 +168,7 @@ pub fn trace_photons(
         1
     };
     let aimed = caustic && factor > 1 && scene.lights.aims();
-    let (caustic_photons, roles, caustic_scales) = if aimed {
-        aimed_roles(settings.photons, factor, &scene.lights)
-    } else {
-        unaimed_roles(settings.photons, factor, scene.lights.len())
-    };
+    let (caustic_photons, roles, caustic_scales) = roles(settings.photons, factor, &scene.lights);
     let chunks = caustic_photons.div_ceil(CHUNK);
     let used = AtomicUsize::new(0);
     let over = AtomicBool::new(false);
@@ -582,11 +561,7 @@ mod tests {
                 max_map_bytes: usize::MAX,
             };
             // The prism's ceiling panel aims its caustic-only photons at the glass.
-            let (_, roles, scales) = if scene.lights.aims() {
-                aimed_roles(2_000, 4, &scene.lights)
-            } else {
-                unaimed_roles(2_000, 4, scene.lights.len())
-            };
+            let (_, roles, scales) = roles(2_000, 4, &scene.lights);
             assert_eq!(scene.lights.aims(), name == "prism", "{name}");
             let chunk = Chunk {
                 scene: &scene,
