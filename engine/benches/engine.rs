@@ -36,6 +36,7 @@ fn photon_settings(photons: usize, storage: Storage, caustic_factor: usize) -> P
         caustic_map: true,
         caustic_factor,
         max_map_bytes: usize::MAX,
+        incoming: false,
     }
 }
 

@@ -81,6 +81,7 @@ fn prism_stores_spikes_and_compact_caustics_equal_full_bit_for_bit() {
                 caustic_map: true,
                 caustic_factor: 1,
                 max_map_bytes: usize::MAX,
+                incoming: false,
             };
             trace_photons(&spectral, &ps, 3, 1, &AtomicBool::new(false)).unwrap()
         };

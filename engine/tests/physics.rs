@@ -528,6 +528,7 @@ fn a_smooth_shaded_glass_ball_focuses_like_a_finely_tessellated_one() {
             caustic_map: true,
             caustic_factor: 1,
             max_map_bytes: usize::MAX,
+            incoming: false,
         };
         let pass =
             trace_photons(&sp, &ps, 5, 1, &std::sync::atomic::AtomicBool::new(false)).unwrap();
@@ -721,6 +722,7 @@ fn a_bin_spreads_over_its_own_width_so_the_rainbow_is_continuous() {
         caustic_map: true,
         caustic_factor: 1,
         max_map_bytes: usize::MAX,
+        incoming: false,
     };
     let cancel = std::sync::atomic::AtomicBool::new(false);
     let maps = trace_photons(&scene, &settings, 1, 1, &cancel).unwrap();
@@ -878,6 +880,7 @@ fn extra_caustic_photons_sample_the_same_caustic_and_leave_the_global_map_alone(
             caustic_map: true,
             caustic_factor,
             max_map_bytes: usize::MAX,
+            incoming: false,
         };
         trace_photons(
             &scene,
@@ -1453,6 +1456,7 @@ fn caustic_pass(
         caustic_map: true,
         caustic_factor: 4,
         max_map_bytes: usize::MAX,
+        incoming: false,
     };
     let cancel = std::sync::atomic::AtomicBool::new(false);
     prismap_engine::photon::trace_photons(spectral, &settings, 11, 1, &cancel).unwrap()

@@ -86,6 +86,11 @@ pub struct RenderArgs {
     /// whose camera samples all reached one surface average their rays together).
     #[arg(long)]
     pub no_fg_pool: bool,
+    /// Guide final-gather rays by the photons: each ray's direction is drawn from where
+    /// the global photons around it came from, mixed with the cosine distribution (for
+    /// walls lit by small bright patches, such as the floor under a spotlight)
+    #[arg(long)]
+    pub fg_guide: bool,
     /// Camera rays per pixel per pass, spread over the pixel; the final-gather rays are
     /// shared out among them (edges and the light seen directly need many).
     #[arg(long)]
@@ -162,6 +167,7 @@ impl RenderArgs {
             seed: self.seed.unwrap_or(base.seed),
             final_gather_rays: self.fg.unwrap_or(base.final_gather_rays),
             pool_gather: base.pool_gather && !self.no_fg_pool,
+            guide_gather: base.guide_gather || self.fg_guide,
             camera_samples: self.samples.unwrap_or(base.camera_samples),
             dispersion_split: self.split.unwrap_or(base.dispersion_split),
             caustic_factor: self.caustic_factor.unwrap_or(base.caustic_factor),

@@ -14,9 +14,9 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::kdtree;
 use super::map::{Kernel, PhotonMap, SurfaceTest};
 use super::record::{Record, oct_decode};
+use super::{guide, kdtree};
 use crate::spectral::{BinGrid, spd};
 
 /// Cache points estimated in a row by one thread, the search radius carried along.
@@ -35,6 +35,69 @@ pub struct IrradianceCache {
     /// Each point by its cell (points are one per cell, see [`thin_out`]).
     cells: CellMap,
     inv_cell: f32,
+    /// Final-gather guides by cube, level and surface orientation (see [`guides_by_cube`]):
+    /// the index of each in `guides` (empty when the map keeps no incoming directions).
+    guide_cells: CellMap,
+    /// 1 / the side of a level-0 guide cube.
+    inv_guide_cell: f32,
+    /// [`guide::GUIDE_FLOATS`] floats per guide (see [`guide::tables`]).
+    guides: Vec<f32>,
+    /// Which levels have guides (bit per level): a lookup probes only those.
+    guide_levels: u32,
+    /// This cache's own number (see [`GuideMemo`]).
+    id: u64,
+}
+
+/// The last guide lookup of one thread's work unit: its cache, its level-0 cube and the
+/// guide found there. Cubes nest (a level-0 cube lies in one cube of every level), so
+/// the guide is a function of the level-0 cube, and neighbouring camera hits — a pixel's
+/// samples, a block's pixels — repeat the lookup for one hash of their key.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GuideMemo(Option<(u64, CellKey, Option<u32>)>);
+
+/// Numbers for caches (see [`GuideMemo`]).
+static CACHE_IDS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// A level-0 guide cube's side, in point spacings: about the global map's typical search
+/// radius, so that a guide pools the photons of a few neighbouring points' estimates.
+const GUIDE_CELLS: f32 = 2.0;
+/// Coarsest guide level (cubes 2^this level-0 sides wide).
+const GUIDE_LEVELS: u8 = 12;
+/// Guides are kept only where at least one in this many points with a histogram has one
+/// (see [`guides_by_cube`]).
+const MIN_GUIDED_SHARE: usize = 16;
+/// Levels above its own a point's histogram joins too, so that a lookup in a cube its
+/// level left empty (a gap between points) finds the guide of the cube around it.
+const GUIDE_REACH: u8 = 2;
+
+/// A point's share of its guide cube (see [`histogram_of`]): its histogram, the photons it
+/// counted, and its estimate's radius.
+type Histogram = Option<(Box<[f32; guide::CELLS]>, usize, f32)>;
+
+/// A point's share of its guide cube's histogram: the power of the photons of its estimate
+/// (`found`, those under `r` away) by the cell of the hemisphere about `n` they came from,
+/// normalised (each point weighs the same in its cube), and how many photons a
+/// final-gather ray could find (see [`super::map::IncomingCode`]) it counted. None when
+/// it counted none.
+fn histogram_of(map: &PhotonMap, bins: usize, n: Vec3, found: &[(f32, u32)], r: f32) -> Histogram {
+    let r2 = r * r;
+    let mut histogram = Box::new([0.0f32; guide::CELLS]);
+    let mut count = 0;
+    for &(d2, i) in found {
+        let i = i as usize;
+        if d2 < r2
+            && let Some(c) = map.incoming(i).and_then(|d| guide::cell_of(n, d))
+        {
+            histogram[c] += map.power_of(i, bins);
+            count += 1;
+        }
+    }
+    let total: f32 = histogram.iter().sum();
+    if count == 0 || !(total > 0.0 && total.is_finite()) {
+        return None;
+    }
+    histogram.iter_mut().for_each(|h| *h /= total);
+    Some((histogram, count, r))
 }
 
 /// The photons irradiance is estimated at: every `every`-th (the map is in kd order, so
@@ -74,6 +137,13 @@ fn cell_key(p: Vec3, n: Vec3, inv_cell: f32) -> CellKey {
     (q(p.x), q(p.y), q(p.z), side)
 }
 
+/// The guide cube of `p` at `level` (side 2^level / `inv_cell`), with the orientation
+/// class of `n` and the level in the key's last field.
+fn guide_key(p: Vec3, n: Vec3, inv_cell: f32, level: u8) -> CellKey {
+    let (x, y, z, side) = cell_key(p, n, inv_cell / (1u32 << level) as f32);
+    (x, y, z, side + 6 * level)
+}
+
 /// A multiply–rotate hash for cell keys (the keys are small integers: SipHash's
 /// protection against chosen keys buys nothing here and costs a lookup's worth of time).
 #[derive(Default)]
@@ -101,9 +171,67 @@ impl std::hash::Hasher for CellHasher {
 
 type CellMap = std::collections::HashMap<CellKey, u32, std::hash::BuildHasherDefault<CellHasher>>;
 
+/// The guides of the points' cubes. Each point joins the cube that holds it at the
+/// finest level whose cubes (side 2^level / `inv_guide_cell`) are as wide as its
+/// estimate's radius, and the [`GUIDE_REACH`] coarser cubes around that: where photons
+/// are sparse the points are too, and their cubes grow with them, so that a lookup finds
+/// a guide there as well (the finest one: see [`IrradianceCache::guide_at`]). Each cube's points'
+/// histograms are summed and made a guide where they counted at least
+/// [`guide::MIN_PHOTONS`] photons and are peaked enough to pay ([`guide::MIN_PEAK`]). Deterministic: the cubes are kept in the order of
+/// their first point.
+fn guides_by_cube(
+    points: &[([f32; 3], u32, Vec<f32>, Histogram)],
+    inv_guide_cell: f32,
+) -> (CellMap, Vec<f32>, u32) {
+    let mut cubes = CellMap::default();
+    let mut sums: Vec<(CellKey, [f32; guide::CELLS], usize)> = Vec::new();
+    for (pos, normal, _, histogram) in points {
+        let Some((h, count, r)) = histogram else {
+            continue;
+        };
+        let level = (0..GUIDE_LEVELS)
+            .find(|&l| r * inv_guide_cell <= (1u32 << l) as f32)
+            .unwrap_or(GUIDE_LEVELS);
+        let (p, n) = (Vec3::from_array(*pos), oct_decode(*normal));
+        for level in level..=(level + GUIDE_REACH).min(GUIDE_LEVELS) {
+            let key = guide_key(p, n, inv_guide_cell, level);
+            let next = sums.len() as u32;
+            let at = *cubes.entry(key).or_insert(next) as usize;
+            if at == sums.len() {
+                sums.push((key, [0.0; guide::CELLS], 0));
+            }
+            let (_, sum, total) = &mut sums[at];
+            sum.iter_mut().zip(h.iter()).for_each(|(s, h)| *s += h);
+            *total += count;
+        }
+    }
+    let mut guide_cells = CellMap::default();
+    let mut guides = Vec::new();
+    let mut levels = 0u32;
+    for (key, sum, count) in &sums {
+        if *count >= guide::MIN_PHOTONS
+            && guide::peak(sum, *count) >= guide::MIN_PEAK
+            && let Some(table) = guide::tables(sum)
+        {
+            levels |= 1 << (key.3 / 6);
+            guide_cells.insert(*key, (guides.len() / guide::GUIDE_FLOATS) as u32);
+            guides.extend_from_slice(&table);
+        }
+    }
+    // A handful of guides among many points changes nothing to see, while every camera
+    // sample would pay a lookup: the rays stay cosine-distributed everywhere.
+    let histograms = points.iter().filter(|p| p.3.is_some()).count();
+    if guide_cells.len() * MIN_GUIDED_SHARE < histograms {
+        return Default::default();
+    }
+    (guide_cells, guides, levels)
+}
+
 impl IrradianceCache {
     /// Estimates irradiance at every `every`-th photon of `map` with `kernel` (radii below
     /// `r_min` are raised to it). `r_lookup` bounds the nearest-point search.
+    /// Where the map keeps its photons' incoming directions, each point also gets a
+    /// final-gather guide ([`guide`]).
     pub fn build(
         map: &PhotonMap,
         grid: &BinGrid,
@@ -113,6 +241,7 @@ impl IrradianceCache {
         r_lookup: f32,
     ) -> Self {
         let n = grid.len();
+        let guided = map.keeps_incoming() && !map.is_empty();
         // Smits triplets are kept as triplets (decoded per lookup at O(N)); colour
         // triplets would need a Jakob–Hanika decode per lookup, so their cache keeps N
         // floats per point (decoded once per point).
@@ -136,7 +265,8 @@ impl IrradianceCache {
         // Chunks of neighbouring points (the map is in kd order): each estimate's search
         // starts at the previous one's radius, reset per chunk so that the result never
         // depends on the thread count.
-        let estimates: Vec<([f32; 3], u32, Vec<f32>)> = ids
+        type Point = ([f32; 3], u32, Vec<f32>, Histogram);
+        let estimates: Vec<Point> = ids
             .par_chunks(HINT_CHUNK)
             .flat_map_iter(|chunk| {
                 let (mut found, mut e, mut hint) = (Vec::new(), vec![0.0f32; n], 0.0);
@@ -147,15 +277,17 @@ impl IrradianceCache {
                         let normal = map.normal_code(i);
                         e.fill(0.0);
                         let k = kernel.starting_at(hint);
-                        let est = map.estimate(grid, p, oct_decode(normal), k, &mut found, &mut e);
+                        let nrm = oct_decode(normal);
+                        let est = map.estimate(grid, p, nrm, k, &mut found, &mut e);
                         hint = est.r_k;
+                        let histogram = guided.then(|| histogram_of(map, n, nrm, &found, est.r));
                         let r = est.r.max(r_min);
                         spd::scale(&mut e, 1.0 / (std::f32::consts::PI * r * r));
                         let value = match (record, grid.smits()) {
                             (Record::Compact, Some(_)) => grid.encode_triplet(&e).to_vec(),
                             _ => e.clone(),
                         };
-                        (map.positions()[i], normal, value)
+                        (map.positions()[i], normal, value, histogram.flatten())
                     })
                     .collect::<Vec<_>>()
             })
@@ -167,13 +299,19 @@ impl IrradianceCache {
         let mut values = Vec::with_capacity(order.len() * stride);
         let mut cells = CellMap::default();
         for &o in &order {
-            let (pos, normal, value) = &estimates[o as usize];
+            let (pos, normal, value, _) = &estimates[o as usize];
             let key = cell_key(Vec3::from_array(*pos), oct_decode(*normal), inv_cell);
             cells.insert(key, positions.len() as u32);
             positions.push(*pos);
             normals.push(*normal);
             values.extend_from_slice(value);
         }
+        let inv_guide_cell = inv_cell / GUIDE_CELLS;
+        let (guide_cells, guides, guide_levels) = if guided {
+            guides_by_cube(&estimates, inv_guide_cell)
+        } else {
+            Default::default()
+        };
         Self {
             positions,
             normals,
@@ -184,7 +322,50 @@ impl IrradianceCache {
             r_lookup,
             cells,
             inv_cell,
+            guide_cells,
+            inv_guide_cell,
+            guides,
+            guide_levels,
+            id: CACHE_IDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         }
+    }
+
+    /// Final-gather guides kept (one per guided cube).
+    pub fn guides(&self) -> usize {
+        self.guides.len() / guide::GUIDE_FLOATS
+    }
+
+    /// The final-gather guide (see [`guide::warp`]) of the finest cube holding `p` that
+    /// has one, for the surface orientation of the side `n` faces, if any (see
+    /// [`guides_by_cube`]). `memo` remembers the last answer (see [`GuideMemo`]).
+    #[inline]
+    pub fn guide_at(&self, p: Vec3, n: Vec3, memo: &mut GuideMemo) -> Option<&[f32]> {
+        if self.guides.is_empty() {
+            return None;
+        }
+        let key = guide_key(p, n, self.inv_guide_cell, 0);
+        let g = match memo.0 {
+            Some((id, k, g)) if id == self.id && k == key => g,
+            _ => {
+                let mut levels = self.guide_levels;
+                let mut found = None;
+                while levels != 0 {
+                    let l = levels.trailing_zeros() as u8;
+                    levels &= levels - 1;
+                    if let Some(&g) = self
+                        .guide_cells
+                        .get(&guide_key(p, n, self.inv_guide_cell, l))
+                    {
+                        found = Some(g);
+                        break;
+                    }
+                }
+                memo.0 = Some((self.id, key, found));
+                found
+            }
+        };
+        let g = g? as usize;
+        Some(&self.guides[g * guide::GUIDE_FLOATS..(g + 1) * guide::GUIDE_FLOATS])
     }
 
     pub fn len(&self) -> usize {
@@ -201,7 +382,9 @@ impl IrradianceCache {
             + self.normals.len() * 4
             + self.values.len() * 4
             + self.axes.len()
-            + self.cells.capacity() * (size_of::<(CellKey, u32)>() + 1)
+            + self.guides.len() * 4
+            + (self.cells.capacity() + self.guide_cells.capacity())
+                * (size_of::<(CellKey, u32)>() + 1)
     }
 
     /// The irradiance (N bins) of the nearest point on the surface and side `n` faces at

@@ -9,8 +9,8 @@ use std::sync::OnceLock;
 use super::kdtree;
 use super::occupancy::Occupancy;
 use super::record::{
-    NormalCode, PhotonHeader, Record, decode_spike, encode_spike, oct_from_16, oct_to_16,
-    pack_record, unpack_record,
+    NormalCode, PhotonHeader, Record, decode_spike, encode_spike, oct_decode, oct_from_16,
+    oct_to_16, pack_record, unpack_record,
 };
 use crate::spectral::smits::BranchSums;
 use crate::spectral::{BinGrid, spd};
@@ -88,6 +88,34 @@ pub struct PhotonBatch {
     /// Packed records (packed storage only; `flux` is then empty).
     pub packed: Vec<u32>,
     pub spikes: usize,
+    /// Each photon's [`IncomingCode`], one per header, when the batch keeps them (see
+    /// [`super::PhotonSettings::incoming`]); else empty.
+    pub incoming: Vec<u16>,
+}
+
+/// Where a stored photon came from, for guiding final-gather rays: the direction back
+/// along its last flight in 2×8-bit octahedral code ([`oct_to_16`]), or
+/// [`IncomingCode::NONE`] for a photon whose last flight did not start at a diffuse
+/// surface: one straight from a light (direct lighting's), or through glass or off a
+/// mirror (a final-gather ray sent back through dispersive glass carries one wavelength:
+/// colour noise, not light).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IncomingCode(pub u16);
+
+impl IncomingCode {
+    pub const NONE: Self = Self(0);
+
+    /// The code of a photon that left a diffuse surface along `dir` (travelling), which
+    /// it came from: −`dir`. Never [`Self::NONE`] (a code of 0 moves one step, a fraction
+    /// of a degree).
+    pub fn from_travel(dir: Vec3) -> Self {
+        Self(oct_to_16(super::record::oct_encode(-dir)).max(1))
+    }
+
+    /// The unit direction the photon came from, or None.
+    pub fn direction(self) -> Option<Vec3> {
+        (self != Self::NONE).then(|| oct_decode(oct_from_16(self.0)))
+    }
 }
 
 impl PhotonBatch {
@@ -106,11 +134,19 @@ impl PhotonBatch {
             flux: Vec::new(),
             packed: Vec::new(),
             spikes: 0,
+            incoming: Vec::new(),
         }
     }
 
     pub fn len(&self) -> usize {
         self.headers.len()
+    }
+
+    /// Records `code` for the photons pushed since the batch held `before` (none, one,
+    /// or none when the push rejected its flux), keeping one code per photon.
+    pub fn tag_incoming(&mut self, before: usize, code: IncomingCode) {
+        debug_assert_eq!(self.incoming.len(), before);
+        self.incoming.resize(self.headers.len(), code.0);
     }
 
     pub fn is_empty(&self) -> bool {
@@ -201,10 +237,13 @@ impl PhotonBatch {
         if self.record == Record::Packed {
             return self.headers.len() * super::record::PACKED_BYTES;
         }
-        self.headers.len() * (size_of::<PhotonHeader>() + 1) + self.flux.len() * 4
+        self.headers.len() * (size_of::<PhotonHeader>() + 1)
+            + self.flux.len() * 4
+            + self.incoming.len() * 2
     }
 
     pub fn append(&mut self, mut other: PhotonBatch) {
+        self.incoming.append(&mut other.incoming);
         self.headers.append(&mut other.headers);
         self.flux.append(&mut other.flux);
         self.packed.append(&mut other.packed);
@@ -356,6 +395,8 @@ pub struct PhotonMap {
     normals16: Vec<u16>,
     flux: Vec<f32>,
     packed: Vec<u32>,
+    /// Incoming codes per photon ([`IncomingCode`]), when the batch kept them; else empty.
+    incoming: Vec<u16>,
     axes: Vec<u8>,
     spikes: usize,
     /// Which cubes hold photons, built by the first density estimate for its search cap
@@ -374,9 +415,15 @@ impl PhotonMap {
         let (mut normals, mut normals16) = (Vec::new(), Vec::new());
         let mut flux = Vec::with_capacity(batch.flux.len());
         let mut packed = Vec::with_capacity(batch.packed.len());
+        let keeps_incoming = batch.incoming.len() == batch.headers.len();
+        debug_assert!(keeps_incoming || batch.incoming.is_empty());
+        let mut incoming = Vec::with_capacity(if keeps_incoming { order.len() } else { 0 });
         for &i in &order {
             let i = i as usize;
             positions.push(raw_pos[i]);
+            if keeps_incoming {
+                incoming.push(batch.incoming[i]);
+            }
             if packed_records {
                 normals16.push(oct_to_16(batch.headers[i].normal));
                 packed.push(batch.packed[i]);
@@ -393,6 +440,7 @@ impl PhotonMap {
             normals16,
             flux,
             packed,
+            incoming,
             axes,
             spikes: batch.spikes,
             occupancy: OnceLock::new(),
@@ -435,11 +483,45 @@ impl PhotonMap {
             + self.normals16.len() * 2
             + self.flux.len() * 4
             + self.packed.len() * 4
+            + self.incoming.len() * 2
             + self.axes.len()
     }
 
     pub fn positions(&self) -> &[[f32; 3]] {
         &self.positions
+    }
+
+    /// Whether the map keeps its photons' incoming directions.
+    pub fn keeps_incoming(&self) -> bool {
+        !self.incoming.is_empty() || self.positions.is_empty()
+    }
+
+    /// Where stored photon `i` came from (None when the map keeps no directions, or for a
+    /// photon final-gather rays would not find: see [`IncomingCode`]).
+    #[inline]
+    pub fn incoming(&self, i: usize) -> Option<Vec3> {
+        IncomingCode(*self.incoming.get(i)?).direction()
+    }
+
+    /// Stored photon `i`'s flux summed over the bins, roughly (exact for full records and
+    /// spikes; a triplet's mean × `bins`, which a flat spectrum's triplet meets): what
+    /// guiding weighs photons by, where only the proportions matter.
+    #[inline]
+    pub fn power_of(&self, i: usize, bins: usize) -> f32 {
+        match self.record {
+            Record::Full => spd::sum(&self.flux[i * self.stride..(i + 1) * self.stride]),
+            _ => {
+                let rec = self.compact_record(i);
+                let mut power = match decode_spike(rec) {
+                    Some((_, a)) => a,
+                    None => (rec[0] + rec[1] + rec[2]) / 3.0 * bins as f32,
+                };
+                if self.record == Record::Spiked {
+                    power += self.flux[5 * i + 4];
+                }
+                power
+            }
+        }
     }
 
     /// The octahedral code of stored photon `i`'s normal.

@@ -1,6 +1,7 @@
 //! The photon pass and photon maps: tracing with full N-bin flux, splitting at
 //! dispersive glass, storage in full / compact / RGB records, and kd-tree search.
 
+pub mod guide;
 pub mod irradiance;
 pub mod kdtree;
 pub mod map;

@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::map::{PhotonBatch, PhotonMap};
+use super::map::{IncomingCode, PhotonBatch, PhotonMap};
 use super::record::Record;
 use crate::lights::LightSet;
 use crate::materials::{
@@ -48,6 +48,9 @@ pub struct PhotonSettings {
     /// Most bytes the pass's photon maps may hold (records + kd-tree); the pass stops
     /// with [`TraceStop::OverBudget`] as soon as its stored photons pass it.
     pub max_map_bytes: usize,
+    /// Keep each global photon's incoming direction ([`IncomingCode`], 2 bytes a photon),
+    /// which guided final gathering reads.
+    pub incoming: bool,
 }
 
 /// What one photon pass produced.
@@ -79,6 +82,9 @@ struct Path {
     depth: u32,
     diffuse_seen: bool,
     specular_seen: bool,
+    /// Whether the last bounce was diffuse (the photon flew straight from a diffuse
+    /// surface to its next hit).
+    from_diffuse: bool,
     /// Where within its bin a single-bin photon's wavelength lies (drawn at its first
     /// dispersive interface, kept after; see [`crate::scene::spectral::eta_in_bin`]).
     lambda_u: Option<f32>,
@@ -347,6 +353,7 @@ fn trace_one(
         depth: 0,
         diffuse_seen: false,
         specular_seen: false,
+        from_diffuse: false,
         lambda_u: None,
         single: None,
     });
@@ -385,7 +392,21 @@ fn trace_one(
                         }
                         break;
                     }
+                    let before = global.len();
                     store(global, 1.0);
+                    if settings.incoming {
+                        // Light a final-gather ray could find here came straight off a
+                        // diffuse surface (see `IncomingCode`). Light through glass or off
+                        // mirrors is left out too: a final-gather ray sent back along it
+                        // would follow one wavelength through dispersive glass, and bring
+                        // colour noise where it was meant to bring light.
+                        let code = if path.from_diffuse {
+                            IncomingCode::from_travel(path.dir)
+                        } else {
+                            IncomingCode::NONE
+                        };
+                        global.tag_incoming(before, code);
+                    }
                     if caustic_path {
                         store(caustics, caustic_scale);
                     }
@@ -402,6 +423,7 @@ fn trace_one(
                         break;
                     }
                     path.diffuse_seen = true;
+                    path.from_diffuse = true;
                     path.dir = cosine_hemisphere(nf, rng.next_2d());
                     path.origin = scene.accel.offset(p, nf, path.dir);
                 }
@@ -416,6 +438,7 @@ fn trace_one(
                         break;
                     }
                     path.specular_seen = true;
+                    path.from_diffuse = false;
                     path.dir = dir;
                     path.origin = scene.accel.offset(p, nf, path.dir);
                 }
@@ -439,6 +462,7 @@ fn trace_one(
                                 depth: path.depth,
                                 diffuse_seen: path.diffuse_seen,
                                 specular_seen: path.specular_seen,
+                                from_diffuse: false,
                                 lambda_u: None,
                                 single,
                             })
@@ -464,6 +488,7 @@ fn trace_one(
                         }
                     }
                     path.specular_seen = true;
+                    path.from_diffuse = false;
                     path.dir = ev.dir;
                     path.origin = scene.accel.offset(p, n, path.dir);
                 }
@@ -559,6 +584,7 @@ mod tests {
                 caustic_map: true,
                 caustic_factor: 4,
                 max_map_bytes: usize::MAX,
+                incoming: false,
             };
             // The prism's ceiling panel aims its caustic-only photons at the glass.
             let (_, roles, scales) = roles(2_000, 4, &scene.lights);

@@ -11,8 +11,9 @@ use crate::materials::microfacet::{Frame, Ggx, reflection_lobe, schlick};
 use crate::materials::{
     attenuate_metal, dielectric_bounce, fresnel_dielectric, metal_bounce, roulette_when_faint,
 };
+use crate::photon::irradiance::GuideMemo;
 use crate::photon::trace::micro_sample;
-use crate::photon::{IrradianceCache, Kernel, PhotonMap};
+use crate::photon::{IrradianceCache, Kernel, PhotonMap, guide};
 use crate::sampling::{Purpose, Rng, cosine_hemisphere, kronecker, r2, sobol02};
 use crate::scene::{SpectralScene, SurfaceKind, path_eta};
 use crate::spectral::spd;
@@ -119,6 +120,8 @@ pub struct Scratch {
     path_len: f32,
     footprint: f32,
     stretch: f32,
+    /// The last final-gather guide looked up (reset per row).
+    guide_memo: GuideMemo,
 }
 
 /// What one final-gather ray works in.
@@ -153,12 +156,14 @@ impl Scratch {
             path_len: 0.0,
             footprint: 0.0,
             stretch: 1.0,
+            guide_memo: GuideMemo::default(),
         }
     }
 
     /// Forgets the radius hints: call at the start of every deterministic work unit.
     pub fn start_row(&mut self) {
         self.hints = [0.0; 2];
+        self.guide_memo = GuideMemo::default();
     }
 
     /// Forgets the pixel's caustic estimate (a new pixel's samples share only theirs).
@@ -623,7 +628,9 @@ impl Gather<'_> {
 
     /// The summed radiance of the sample's `fg.rays` final-gather rays from `p`, into
     /// `s.fg`: directions from the pixel's sequence, cosine-distributed about the shading
-    /// normal `ns`. A direction below the geometric surface (`nf`, the side seen; only
+    /// normal `ns` — or, where the irradiance cache has a guide for `p`, drawn from the
+    /// guide and each ray's radiance weighed by the cosine density over the guide's
+    /// ([`guide::warp`]), which keeps the sum an estimate of the same irradiance / π. A direction below the geometric surface (`nf`, the side seen; only
     /// where smooth shading tilts `ns` away from it) brings nothing back.
     #[inline(always)]
     fn gather_rays(
@@ -635,25 +642,35 @@ impl Gather<'_> {
         s: &mut Scratch,
     ) {
         s.fg.fill(0.0);
+        if fg.rays == 0 {
+            return;
+        }
+        // Where the photons here came from, if the cache knows (see `photon::guide`).
+        let guide = (self.irradiance).and_then(|c| c.guide_at(p, nf, &mut s.guide_memo));
         for j in 0..fg.rays {
             let u = sobol02(fg.first.wrapping_add(j), fg.scramble);
+            let (u, weight) = match guide {
+                Some(g) => guide::warp(g, u),
+                None => (u, 1.0),
+            };
             let dir = cosine_hemisphere(ns, u);
             if ns != nf && !(dir.dot(nf) > 0.0) {
                 continue;
             }
             let origin = self.scene.accel.offset(p, nf, dir);
-            self.final_gather_ray(origin, dir, rng, &mut s.ray, &mut s.fg);
+            self.final_gather_ray(origin, dir, weight, rng, &mut s.ray, &mut s.fg);
         }
     }
 
     /// Radiance along a final-gather ray from the global map at its first diffuse hit
-    /// (through mirrors and glass), added to `acc`. Emitters are not counted: direct light
+    /// (through mirrors and glass), times `weight`, added to `acc`. Emitters are not counted: direct light
     /// and caustics have their own estimates.
     #[inline(always)]
     fn final_gather_ray(
         &self,
         mut origin: Vec3,
         mut dir: Vec3,
+        weight: f32,
         rng: &mut Rng,
         b: &mut RayBuffers,
         acc: &mut [f32],
@@ -704,10 +721,12 @@ impl Gather<'_> {
                     // over the bins.
                     debug_assert_eq!(reflectance.len(), e.len());
                     debug_assert_eq!(acc.len(), e.len());
-                    let inv_pi = std::f32::consts::FRAC_1_PI;
+                    // The ray's weight (1 unguided) joins 1/π: not the throughput, whose
+                    // size decides the roulette at rough bounces.
+                    let k = std::f32::consts::FRAC_1_PI * weight;
                     let terms = e.iter().zip(reflectance.iter().zip(t.iter()));
                     for (a, (e, (r, t))) in acc.iter_mut().zip(terms) {
-                        *a += *e * r * t * inv_pi;
+                        *a += *e * r * t * k;
                     }
                     return;
                 }

@@ -468,6 +468,7 @@ impl RenderSession {
             caustic_map: true,
             caustic_factor: self.settings.caustic_factor,
             max_map_bytes,
+            incoming: self.settings.guides_gather(),
         }
     }
 

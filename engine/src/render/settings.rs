@@ -24,6 +24,14 @@ pub struct RenderSettings {
     /// [`crate::render::gather::Gather::block`]).
     #[serde(default = "yes")]
     pub pool_gather: bool,
+    /// Final-gather rays draw their directions from where the global photons around
+    /// their start came from, mixed with the cosine distribution (`--fg-guide`; see
+    /// [`crate::photon::guide`]). Off by default: it pays where walls are lit by small
+    /// bright patches (Blender's spot-lit stage: +2.5 dB on its back wall at equal
+    /// time), and costs the built-in prism 15 % of its passes for nothing it needs
+    /// (BENCHMARKS.md, session 34).
+    #[serde(default)]
+    pub guide_gather: bool,
     /// Camera rays per pixel per pass (`--samples`), spread over the pixel; the
     /// final-gather rays are shared out among them. Edges, the light seen directly and
     /// direct shadows need many positions within a pixel, and a camera ray costs less
@@ -101,6 +109,7 @@ impl Default for RenderSettings {
             seed: 1,
             final_gather_rays: 4,
             pool_gather: true,
+            guide_gather: false,
             camera_samples: DEFAULT_CAMERA_SAMPLES,
             max_bounces: DEFAULT_MAX_BOUNCES,
             alpha: 2.0 / 3.0,
@@ -242,6 +251,11 @@ impl RenderSettings {
             camera_samples: 1,
             ..self.clone()
         }
+    }
+
+    /// Whether final-gather rays are guided by the photons: asked for, and there are rays.
+    pub fn guides_gather(&self) -> bool {
+        self.guide_gather && self.final_gather_rays > 0
     }
 
     /// Whether final-gather rays are pooled between pixels: asked for, and there are rays.
