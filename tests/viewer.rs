@@ -330,6 +330,44 @@ fn viewer_image_after_n_passes_equals_the_engines() {
 }
 
 #[test]
+fn the_guide_toggle_restarts_with_guided_final_gather_rays() {
+    // Guiding is off by default; clicking "guide" restarts the render guided, and the
+    // viewer's image after 2 passes is the engine's with `guide_gather` on, bit for bit
+    // (the prism has guides: its walls are lit by the spot's bright patches).
+    let mut h = harness("prism");
+    h.state().stop_after(Some(2));
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    assert!(!h.state().settings.guide_gather);
+    let gen_before = h.state().last_restart_generation;
+    h.get_by_label("guide").click();
+    h.step();
+    assert!(h.state().last_restart_generation > gen_before, "restarts");
+    assert!(h.state().settings.guide_gather);
+    wait_until(&mut h, "2 guided passes", |a| {
+        a.last_restart_generation > gen_before && passes(a) == 2
+    });
+    let shown = h.state().snapshot.clone().unwrap();
+    let scene = prismap::scene::load_builtin("prism").unwrap();
+    let render = |guide_gather| {
+        let s = RenderSettings {
+            guide_gather,
+            ..h.state().settings.clone()
+        };
+        let mut engine = RenderSession::new(&scene, s).unwrap();
+        for _ in 0..2 {
+            engine.run_pass().unwrap();
+        }
+        engine.image()
+    };
+    let same = |a: &prismap::render::Image| {
+        (a.pixels.iter().zip(&shown.image.pixels))
+            .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits))
+    };
+    assert!(same(&render(true)), "the viewer renders the guided image");
+    assert!(!same(&render(false)), "which the unguided one is not");
+}
+
+#[test]
 fn the_pool_toggle_restarts_with_each_pixels_own_rays() {
     // Pooling is on by default; clicking "pool" restarts the render unpooled, and the
     // viewer's image after 2 passes is the engine's with `pool_gather` off, bit for bit.

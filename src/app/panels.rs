@@ -161,6 +161,14 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                         app.settings.pool_gather = !app.settings.pool_gather;
                         restart = true;
                     }
+                    if ui
+                        .selectable_label(app.settings.guide_gather, "guide")
+                        .on_hover_text("Final-gather rays go where the photons around them came from, mixed with the cosine distribution: less noise on walls lit by small bright patches (the floor under a spotlight), some cost elsewhere (--fg-guide)")
+                        .clicked()
+                    {
+                        app.settings.guide_gather = !app.settings.guide_gather;
+                        restart = true;
+                    }
                 });
                 restart |= ui
                     .add(
