@@ -72,6 +72,14 @@ class Gltf:
                     "rotation": look_rotation(direction, (0, 1, 0)),
                     "extensions": {"KHR_lights_punctual": {"light": len(lights["lights"]) - 1}}})
 
+    def sun(self, name, direction, intensity, color=(1, 1, 1)):
+        """A directional light (lux) shining along `direction`."""
+        self.used.add("KHR_lights_punctual")
+        lights = self.doc.setdefault("extensions", {}).setdefault("KHR_lights_punctual", {"lights": []})
+        lights["lights"].append({"name": name, "type": "directional", "color": list(color), "intensity": intensity})
+        self._node({"name": name, "rotation": look_rotation(direction, (0, 1, 0)),
+                    "extensions": {"KHR_lights_punctual": {"light": len(lights["lights"]) - 1}}})
+
     def point(self, name, position, intensity, color=(1, 1, 1)):
         self.used.add("KHR_lights_punctual")
         lights = self.doc.setdefault("extensions", {}).setdefault("KHR_lights_punctual", {"lights": []})
