@@ -91,6 +91,10 @@ pub struct RenderArgs {
     /// walls lit by small bright patches, such as the floor under a spotlight)
     #[arg(long)]
     pub fg_guide: bool,
+    /// Wavelengths a camera sample follows past the first dispersive glass it meets,
+    /// stratified (glass seen directly then shows them all instead of one at random; 1–64)
+    #[arg(long)]
+    pub glass_split: Option<u32>,
     /// Camera rays per pixel per pass, spread over the pixel; the final-gather rays are
     /// shared out among them (edges and the light seen directly need many).
     #[arg(long)]
@@ -169,6 +173,7 @@ impl RenderArgs {
             pool_gather: base.pool_gather && !self.no_fg_pool,
             guide_gather: base.guide_gather || self.fg_guide,
             camera_samples: self.samples.unwrap_or(base.camera_samples),
+            glass_split: self.glass_split.unwrap_or(base.glass_split),
             dispersion_split: self.split.unwrap_or(base.dispersion_split),
             caustic_factor: self.caustic_factor.unwrap_or(base.caustic_factor),
             global_k: self.global_k.unwrap_or(base.global_k),

@@ -43,6 +43,9 @@ pub struct Gather<'a> {
     pub pool_reach: f32,
     /// Camera rays per pixel per pass; the final-gather rays are shared among them.
     pub camera_samples: u32,
+    /// Wavelengths a camera sample follows past its first dispersive glass (see
+    /// [`Gather::pixel`]; 1: one, picked ∝ throughput).
+    pub glass_split: u32,
     /// Safety cap on a path's specular bounces (Russian roulette ends paths first).
     pub max_bounces: u32,
     /// How far from the pixel's caustic estimate, as a fraction of its radius, another
@@ -122,6 +125,24 @@ pub struct Scratch {
     stretch: f32,
     /// The last final-gather guide looked up (reset per row).
     guide_memo: GuideMemo,
+}
+
+/// How a camera sample follows dispersive glass. At the first dispersive interface a
+/// path picks one bin ∝ its throughput (weight 1/p), so glass seen directly shows one
+/// wavelength per sample: colour noise that fades only as 1/√samples. With `ways` > 1 the
+/// sample follows `ways` wavelengths past that pick, at stratified points of the
+/// throughput's distribution, each weighing 1/`ways`: the primary path, and `ways` − 1
+/// extra ones that retrace the camera ray and count only what lies past their own pick
+/// (before it, the primary counted it). Their average is an unbiased estimate of what
+/// lies past the glass, with far less colour noise. Only the primary gathers indirect
+/// light (final-gather rays, pooled or not), scaled by `ways`: one wavelength's gather,
+/// chosen uniformly among them, is an unbiased estimate of their mean, and the gather is
+/// the costly part.
+#[derive(Clone, Copy, Debug)]
+struct Split {
+    ways: u32,
+    /// An extra path: counts nothing before its pick, and gathers no indirect light.
+    sub: bool,
 }
 
 /// What one final-gather ray works in.
@@ -373,15 +394,21 @@ impl Gather<'_> {
             let (x, y) = (px as f32 + jx, py as f32 + jy);
             let dir = camera_dir_with(camera, tan_y, x, y, width, height);
             let spectral_u = spectral_point(sample.light_index, fg.spectral_offset);
-            self.radiance(
-                self.scene.camera.position,
-                dir,
-                spectral_u,
-                rng,
-                sample,
-                s,
-                out,
-            );
+            let ways = self.glass_split.max(1);
+            let origin = self.scene.camera.position;
+            let primary = Split { ways, sub: false };
+            let split = self.radiance(origin, dir, spectral_u, rng, sample, s, out, primary);
+            // Past dispersive glass the sample follows `ways` wavelengths, stratified over
+            // the throughput's distribution: the other ones retrace the ray and count only
+            // what lies past their pick (see [`Split`]).
+            if split {
+                for i in 1..ways {
+                    let u = spectral_u + i as f32 / ways as f32;
+                    let u = within_unit(if u >= 1.0 { u - 1.0 } else { u });
+                    let sub = Split { ways, sub: true };
+                    self.radiance(origin, dir, u, rng, sample, s, out, sub);
+                }
+            }
         }
         if samples > 1 {
             spd::scale(out, 1.0 / samples as f32);
@@ -389,7 +416,9 @@ impl Gather<'_> {
     }
 
     /// Radiance along a camera ray, added to `out`. `spectral_u` (uniform in [0, 1))
-    /// chooses the wavelength if dispersive glass splits the path.
+    /// chooses the wavelength if dispersive glass splits the path; returns whether it
+    /// did. `split` says how many wavelengths the sample follows past that glass, and
+    /// whether this path is one of the extra ones (see [`Split`]).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn radiance(
@@ -401,29 +430,34 @@ impl Gather<'_> {
         fg: GatherSequence,
         s: &mut Scratch,
         out: &mut [f32],
-    ) {
+        split: Split,
+    ) -> bool {
         let scene = self.scene;
         s.throughput.fill(1.0);
         // Where within its bin the path's wavelength lies, once dispersive glass picks it.
         let mut lambda_u = None;
         let mut spectral_u = Some(spectral_u);
+        // Whether the path's wavelength has been picked, and so whether an extra path
+        // counts what it meets.
+        let mut picked = false;
         s.path_len = 0.0;
         for _ in 0..self.max_bounces {
+            let counts = !split.sub || picked;
             let Some(hit) = scene.intersect(origin, dir) else {
                 // An escaping path sees the sky, if the scene has one.
-                if let Some(sky) = &scene.environment {
+                if let Some(sky) = scene.environment.as_ref().filter(|_| counts) {
                     for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(sky) {
                         *o += t * l;
                     }
                 }
-                return;
+                return picked;
             };
             let (p, nf, front) = (hit.p, hit.nf, hit.front);
             s.path_len += (p - origin).length();
             let mat = scene.material(&hit);
             mat.absorb_inside(&hit, &mut s.throughput);
             // Emitters seen directly or through specular surfaces.
-            if front {
+            if front && counts {
                 let mut buf = std::mem::take(&mut s.refl);
                 if let Some(e) = scene.emission_at(mat, &hit, &mut buf) {
                     for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(e) {
@@ -434,10 +468,20 @@ impl Gather<'_> {
             }
             match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {
+                    if !counts {
+                        return false;
+                    }
                     let mut buf = std::mem::take(&mut s.refl);
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut buf);
                     s.stretch = 1.0 / dir.dot(nf).abs().max(0.05);
-                    self.shade_diffuse(p, nf, hit.ns, reflectance, rng, fg, s);
+                    // Past a split the throughput carries 1/ways: the primary path's
+                    // final gather, the only one, is scaled back up (see [`Split`]).
+                    let gather = match (split.sub, picked) {
+                        (true, _) => None,
+                        (false, true) => Some(split.ways as f32),
+                        (false, false) => Some(1.0),
+                    };
+                    self.shade_diffuse(p, nf, hit.ns, reflectance, rng, fg, s, gather);
                     // Lambertian radiance ρ E / π, times the path's throughput, in one
                     // pass over the bins.
                     debug_assert_eq!(reflectance.len(), s.acc.len());
@@ -447,19 +491,30 @@ impl Gather<'_> {
                         *o += t * (e * r * inv_pi);
                     }
                     s.refl = buf;
-                    return;
+                    return picked;
                 }
                 kind => {
-                    self.rough_highlight(kind, &hit, dir, rng, s, out);
+                    if counts {
+                        self.rough_highlight(kind, &hit, dir, rng, s, out);
+                    }
                     let (t, texel) = (&mut s.throughput, &mut s.refl);
+                    let unpicked = spectral_u.is_some();
                     let wl = (&mut lambda_u, &mut spectral_u);
-                    match self.specular_bounce(kind, &hit, dir, t, texel, wl, rng) {
+                    let next = self.specular_bounce(kind, &hit, dir, t, texel, wl, rng);
+                    if unpicked && spectral_u.is_none() {
+                        picked = true;
+                        if split.ways > 1 {
+                            spd::scale(&mut s.throughput, 1.0 / split.ways as f32);
+                        }
+                    }
+                    match next {
                         Some((o, d)) => (origin, dir) = (o, d),
-                        None => return,
+                        None => return picked,
                     }
                 }
             }
         }
+        picked
     }
 
     /// The highlight of punctual and distant lights on a rough metal or glass, added to
@@ -537,6 +592,7 @@ impl Gather<'_> {
         rng: &mut Rng,
         fg: GatherSequence,
         s: &mut Scratch,
+        gather: Option<f32>,
     ) {
         if self.final_gather_rays == 0 {
             // Direct visualisation of the global map: all light in one estimate.
@@ -564,6 +620,11 @@ impl Gather<'_> {
             self.caustic_irradiance(cm, p, nf, s);
             spd::add_scaled(&mut s.acc, &s.caustic_e, 1.0);
         }
+        // The extra wavelengths of a split sample gather no indirect light: the
+        // primary's final gather, scaled by `boost`, stands for all of them.
+        let Some(boost) = gather else {
+            return;
+        };
         // Indirect light: final gather. Cosine sampling makes each ray's weight ρ, i.e.
         // irradiance π·mean(L), so it joins the other irradiance terms. The pixel's rays
         // are shared out among its camera samples (`fg.rays` of them here) and every ray
@@ -601,6 +662,7 @@ impl Gather<'_> {
                 .zip(wl_sum.iter_mut());
             // The pixel's first diffuse sample starts its sums (what adding to zeros
             // gives; a block does not clear them), the others add to them.
+            let inv_pi = inv_pi * boost;
             if first_sample {
                 for (((t, r), l), ((ws, ls), wls)) in terms.zip(sums) {
                     let w = t * r * inv_pi;
@@ -622,7 +684,7 @@ impl Gather<'_> {
             self.gather_rays(p, (nf, ns), rng, fg, s);
             let samples = self.camera_samples.max(1) as f32;
             let weight = std::f32::consts::PI * samples / self.final_gather_rays as f32;
-            spd::add_scaled(&mut s.acc, &s.fg, weight);
+            spd::add_scaled(&mut s.acc, &s.fg, weight * boost);
         }
     }
 
@@ -998,6 +1060,7 @@ mod tests {
             pool_gather: false,
             pool_reach: POOL_REACH,
             camera_samples: 4,
+            glass_split: 1,
             max_bounces: 16,
             caustic_reuse: CAUSTIC_REUSE,
             tan_half_fov: camera_tan_half_fov(&scene.camera),
@@ -1022,6 +1085,7 @@ mod tests {
             final_gather_rays: 2,
             pool_gather: true,
             camera_samples: 2,
+            glass_split: 1,
             ..test_gather(scene, empty, None, Kernel::adaptive(8, 1.0, 1.0, 1.0))
         }
     }

@@ -408,6 +408,7 @@ impl RenderSession {
             pool_gather: self.settings.pools_gather(),
             pool_reach: super::gather::POOL_REACH * (self.radius_sq_factor.sqrt() as f32),
             camera_samples: self.settings.camera_samples,
+            glass_split: self.settings.glass_split,
             max_bounces: self.settings.max_bounces,
             caustic_reuse: self.caustic_reuse,
             tan_half_fov: super::gather::camera_tan_half_fov(&self.scene.camera),

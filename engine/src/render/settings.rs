@@ -38,6 +38,11 @@ pub struct RenderSettings {
     /// than the final-gather rays it carries.
     #[serde(default = "default_camera_samples")]
     pub camera_samples: u32,
+    /// Wavelengths a camera sample follows past the first dispersive glass it meets
+    /// (`--glass-split`): glass seen directly shows them all, stratified, instead of one
+    /// picked at random. 1 follows one.
+    #[serde(default = "default_glass_split")]
+    pub glass_split: u32,
     /// Safety cap on the bounces of any path, photon or camera. Paths end by Russian
     /// roulette on the reflectance (unbiased); the cap only stops paths that lose no energy
     /// (light trapped by total internal reflection, lossless mirrors). At the default 1024
@@ -111,6 +116,7 @@ impl Default for RenderSettings {
             pool_gather: true,
             guide_gather: false,
             camera_samples: DEFAULT_CAMERA_SAMPLES,
+            glass_split: DEFAULT_GLASS_SPLIT,
             max_bounces: DEFAULT_MAX_BOUNCES,
             alpha: 2.0 / 3.0,
             global_radius: None,
@@ -171,6 +177,15 @@ fn yes() -> bool {
 
 fn default_camera_samples() -> u32 {
     DEFAULT_CAMERA_SAMPLES
+}
+
+/// Wavelengths a camera sample follows past dispersive glass, by default.
+pub const DEFAULT_GLASS_SPLIT: u32 = 4;
+/// Most wavelengths a camera sample may follow past dispersive glass.
+pub const MAX_GLASS_SPLIT: u32 = 64;
+
+fn default_glass_split() -> u32 {
+    DEFAULT_GLASS_SPLIT
 }
 
 /// Default safety cap on path bounces (see [`RenderSettings::max_bounces`]).
@@ -301,6 +316,12 @@ impl RenderSettings {
             let reason =
                 format!("camera rays per pixel must be between 1 and {MAX_CAMERA_SAMPLES}");
             return Err(out_of_range("--samples", self.camera_samples, reason));
+        }
+        if self.glass_split == 0 || self.glass_split > MAX_GLASS_SPLIT {
+            let reason = format!(
+                "wavelengths a camera sample follows past glass must be between 1 and {MAX_GLASS_SPLIT}"
+            );
+            return Err(out_of_range("--glass-split", self.glass_split, reason));
         }
         if self.max_bounces == 0 || self.max_bounces > MAX_BOUNCES {
             let reason = format!("the bounce cap must be between 1 and {MAX_BOUNCES}");
