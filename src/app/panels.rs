@@ -177,6 +177,13 @@ pub fn controls(app: &mut ViewerApp, ui: &mut egui::Ui) {
                     )
                     .on_hover_text("Camera rays per pixel per pass, spread over the pixel (--samples); the final-gather rays are shared out among them")
                     .changed();
+                restart |= ui
+                    .add(
+                        egui::Slider::new(&mut app.settings.glass_split, 1..=16)
+                            .text("Glass split"),
+                    )
+                    .on_hover_text("Wavelengths each camera ray follows past the first dispersive glass it meets, stratified over the spectrum (--glass-split): glass seen directly shows them all instead of one at random, so its colour noise falls; 1 follows one")
+                    .changed();
                 {
                     egui::ComboBox::from_label("Resolution")
                         .selected_text(format!("{}×{}", app.settings.width, app.settings.height))
