@@ -125,6 +125,10 @@ pub struct Scratch {
     stretch: f32,
     /// The last final-gather guide looked up (reset per row).
     guide_memo: GuideMemo,
+    /// The camera sample's state at its wavelength pick, and its throughput there, which
+    /// its extra wavelengths start from (see [`Split`]).
+    pick: Option<Pick>,
+    pick_t: Vec<f32>,
 }
 
 /// How a camera sample follows dispersive glass. At the first dispersive interface a
@@ -132,8 +136,9 @@ pub struct Scratch {
 /// wavelength per sample: colour noise that fades only as 1/√samples. With `ways` > 1 the
 /// sample follows `ways` wavelengths past that pick, at stratified points of the
 /// throughput's distribution, each weighing 1/`ways`: the primary path, and `ways` − 1
-/// extra ones that retrace the camera ray and count only what lies past their own pick
-/// (before it, the primary counted it). Their average is an unbiased estimate of what
+/// extra ones that start from the primary's own state at its pick (the hit, the ray and
+/// the throughput; [`Pick`]), so that all of them share the path before it, which the
+/// primary counted once. Given that path, their average is an unbiased estimate of what
 /// lies past the glass, with far less colour noise. Only the primary gathers indirect
 /// light (final-gather rays, pooled or not), scaled by `ways`: one wavelength's gather,
 /// chosen uniformly among them, is an unbiased estimate of their mean, and the gather is
@@ -141,8 +146,30 @@ pub struct Scratch {
 #[derive(Clone, Copy, Debug)]
 struct Split {
     ways: u32,
-    /// An extra path: counts nothing before its pick, and gathers no indirect light.
+    /// An extra path: gathers no indirect light.
     sub: bool,
+}
+
+/// A camera path's state where it meets its first dispersive glass, before it picks a
+/// wavelength there (its throughput is kept in `Scratch::pick_t`).
+#[derive(Clone, Copy, Debug)]
+struct Pick {
+    hit: SurfaceHit,
+    dir: Vec3,
+    path_len: f32,
+    /// Bounces left after this one.
+    bounces: u32,
+}
+
+/// Where a camera path stands as it is followed (see [`Gather::follow`]).
+#[derive(Clone, Copy, Debug)]
+struct PathState {
+    /// The path's stratified number for its wavelength pick, until it is used.
+    spectral_u: Option<f32>,
+    /// Where within its bin the path's wavelength lies, once picked.
+    lambda_u: Option<f32>,
+    picked: bool,
+    bounces: u32,
 }
 
 /// What one final-gather ray works in.
@@ -178,6 +205,8 @@ impl Scratch {
             footprint: 0.0,
             stretch: 1.0,
             guide_memo: GuideMemo::default(),
+            pick: None,
+            pick_t: Vec::with_capacity(n),
         }
     }
 
@@ -399,14 +428,14 @@ impl Gather<'_> {
             let primary = Split { ways, sub: false };
             let split = self.radiance(origin, dir, spectral_u, rng, sample, s, out, primary);
             // Past dispersive glass the sample follows `ways` wavelengths, stratified over
-            // the throughput's distribution: the other ones retrace the ray and count only
-            // what lies past their pick (see [`Split`]).
-            if split {
+            // the throughput's distribution: the other ones start where the primary
+            // picked its own (see [`Split`]).
+            if split && ways > 1 {
                 for i in 1..ways {
                     let u = spectral_u + i as f32 / ways as f32;
                     let u = within_unit(if u >= 1.0 { u - 1.0 } else { u });
                     let sub = Split { ways, sub: true };
-                    self.radiance(origin, dir, u, rng, sample, s, out, sub);
+                    self.resume_at_pick(u, rng, sample, s, out, sub);
                 }
             }
         }
@@ -417,14 +446,14 @@ impl Gather<'_> {
 
     /// Radiance along a camera ray, added to `out`. `spectral_u` (uniform in [0, 1))
     /// chooses the wavelength if dispersive glass splits the path; returns whether it
-    /// did. `split` says how many wavelengths the sample follows past that glass, and
-    /// whether this path is one of the extra ones (see [`Split`]).
+    /// did. With `split.ways` > 1 the path keeps its state at that pick for the extra
+    /// wavelengths ([`Self::resume_at_pick`]; see [`Split`]).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn radiance(
         &self,
-        mut origin: Vec3,
-        mut dir: Vec3,
+        origin: Vec3,
+        dir: Vec3,
         spectral_u: f32,
         rng: &mut Rng,
         fg: GatherSequence,
@@ -432,20 +461,90 @@ impl Gather<'_> {
         out: &mut [f32],
         split: Split,
     ) -> bool {
-        let scene = self.scene;
         s.throughput.fill(1.0);
-        // Where within its bin the path's wavelength lies, once dispersive glass picks it.
-        let mut lambda_u = None;
-        let mut spectral_u = Some(spectral_u);
-        // Whether the path's wavelength has been picked, and so whether an extra path
-        // counts what it meets.
-        let mut picked = false;
         s.path_len = 0.0;
-        for _ in 0..self.max_bounces {
-            let counts = !split.sub || picked;
+        s.pick = None;
+        let state = PathState {
+            spectral_u: Some(spectral_u),
+            lambda_u: None,
+            picked: false,
+            bounces: self.max_bounces,
+        };
+        self.follow(origin, dir, state, rng, fg, s, out, split)
+    }
+
+    /// One of a split sample's extra wavelengths (see [`Split`]): the primary path's
+    /// state at its pick (`s.pick`), picked again at `spectral_u`, its throughput a
+    /// 1/ways share, followed from there. It counts only what lies past the pick and
+    /// gathers no indirect light.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn resume_at_pick(
+        &self,
+        spectral_u: f32,
+        rng: &mut Rng,
+        fg: GatherSequence,
+        s: &mut Scratch,
+        out: &mut [f32],
+        split: Split,
+    ) {
+        let Some(pick) = s.pick else {
+            return;
+        };
+        s.throughput.copy_from_slice(&s.pick_t);
+        s.path_len = pick.path_len;
+        let mat = self.scene.material(&pick.hit);
+        let (mut lambda_u, mut u) = (None, Some(spectral_u));
+        let (t, texel) = (&mut s.throughput, &mut s.refl);
+        let next = self.specular_bounce(
+            &mat.kind,
+            &pick.hit,
+            pick.dir,
+            t,
+            texel,
+            (&mut lambda_u, &mut u),
+            rng,
+        );
+        spd::scale(&mut s.throughput, 1.0 / split.ways as f32);
+        let Some((origin, dir)) = next else {
+            return;
+        };
+        let state = PathState {
+            spectral_u: None,
+            lambda_u,
+            picked: true,
+            bounces: pick.bounces,
+        };
+        self.follow(origin, dir, state, rng, fg, s, out, split);
+    }
+
+    /// Follows a camera path from `origin` along `dir` in `state` (the throughput in
+    /// `s.throughput`), adding what it meets to `out`; returns whether it picked a
+    /// wavelength at dispersive glass.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn follow(
+        &self,
+        mut origin: Vec3,
+        mut dir: Vec3,
+        state: PathState,
+        rng: &mut Rng,
+        fg: GatherSequence,
+        s: &mut Scratch,
+        out: &mut [f32],
+        split: Split,
+    ) -> bool {
+        let scene = self.scene;
+        let PathState {
+            mut spectral_u,
+            mut lambda_u,
+            mut picked,
+            bounces,
+        } = state;
+        for bounce in 0..bounces {
             let Some(hit) = scene.intersect(origin, dir) else {
                 // An escaping path sees the sky, if the scene has one.
-                if let Some(sky) = scene.environment.as_ref().filter(|_| counts) {
+                if let Some(sky) = &scene.environment {
                     for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(sky) {
                         *o += t * l;
                     }
@@ -457,7 +556,7 @@ impl Gather<'_> {
             let mat = scene.material(&hit);
             mat.absorb_inside(&hit, &mut s.throughput);
             // Emitters seen directly or through specular surfaces.
-            if front && counts {
+            if front {
                 let mut buf = std::mem::take(&mut s.refl);
                 if let Some(e) = scene.emission_at(mat, &hit, &mut buf) {
                     for ((o, t), l) in out.iter_mut().zip(&s.throughput).zip(e) {
@@ -468,9 +567,6 @@ impl Gather<'_> {
             }
             match &mat.kind {
                 SurfaceKind::Diffuse { reflectance } => {
-                    if !counts {
-                        return false;
-                    }
                     let mut buf = std::mem::take(&mut s.refl);
                     let reflectance = scene.reflectance_at(mat, reflectance, &hit, &mut buf);
                     s.stretch = 1.0 / dir.dot(nf).abs().max(0.05);
@@ -494,11 +590,30 @@ impl Gather<'_> {
                     return picked;
                 }
                 kind => {
-                    if counts {
-                        self.rough_highlight(kind, &hit, dir, rng, s, out);
+                    self.rough_highlight(kind, &hit, dir, rng, s, out);
+                    let unpicked = spectral_u.is_some();
+                    // The state the extra wavelengths start from, if this bounce picks
+                    // one (see [`Split`]).
+                    if unpicked
+                        && split.ways > 1
+                        && matches!(
+                            kind,
+                            SurfaceKind::Dielectric {
+                                dispersive: true,
+                                ..
+                            }
+                        )
+                    {
+                        s.pick_t.clear();
+                        s.pick_t.extend_from_slice(&s.throughput);
+                        s.pick = Some(Pick {
+                            hit,
+                            dir,
+                            path_len: s.path_len,
+                            bounces: bounces - bounce - 1,
+                        });
                     }
                     let (t, texel) = (&mut s.throughput, &mut s.refl);
-                    let unpicked = spectral_u.is_some();
                     let wl = (&mut lambda_u, &mut spectral_u);
                     let next = self.specular_bounce(kind, &hit, dir, t, texel, wl, rng);
                     if unpicked && spectral_u.is_none() {
@@ -506,6 +621,9 @@ impl Gather<'_> {
                         if split.ways > 1 {
                             spd::scale(&mut s.throughput, 1.0 / split.ways as f32);
                         }
+                    } else if unpicked {
+                        // No pick here (a single-bin throughput): no extra wavelengths.
+                        s.pick = None;
                     }
                     match next {
                         Some((o, d)) => (origin, dir) = (o, d),
