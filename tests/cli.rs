@@ -233,6 +233,52 @@ fn no_fg_pool_renders_each_pixel_from_its_own_rays_and_the_stats_say_which() {
 }
 
 #[test]
+fn fg_guide_and_glass_split_change_the_prism_and_the_stats_say_so() {
+    let dir = temp_dir("guide-split");
+    let run = |extra: &[&str], name: &str| {
+        let (exr, stats) = (
+            dir.join(format!("{name}.exr")),
+            dir.join(format!("{name}.json")),
+        );
+        let mut cmd = prismap();
+        cmd.args(["render", "prism", "--photons", "4000", "--passes", "2"])
+            .args(["--size", "48x27"])
+            .args(extra)
+            .arg("-o")
+            .arg(&exr)
+            .arg("--stats")
+            .arg(&stats);
+        succeeds(&mut cmd);
+        let s: prismap::output::Stats =
+            serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        (std::fs::read(&exr).unwrap(), s.fg_guide, s.glass_split)
+    };
+    let (default, guided, split) = run(&[], "default");
+    assert!(!guided && split == 4, "{guided} {split}");
+    let (one, _, split) = run(&["--glass-split", "1"], "one");
+    assert_eq!(split, 1);
+    assert_ne!(
+        default, one,
+        "four wavelengths past the glass change its pixels"
+    );
+    let (with_guide, guided, _) = run(&["--fg-guide"], "guided");
+    assert!(guided);
+    assert_ne!(
+        default, with_guide,
+        "guided final-gather rays change the pixels"
+    );
+    // An absurd split is refused, naming the flag and the value.
+    let out = prismap()
+        .args(["render", "prism", "--glass-split", "0", "--passes", "1"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--glass-split") && err.contains('0'), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn same_command_gives_a_bit_identical_exr_on_1_2_and_8_threads() {
     let dir = temp_dir("det");
     let run = |threads: &str, name: &str| {

@@ -23,6 +23,14 @@ pub struct Stats {
     /// written before session 19, which did not: false).
     #[serde(default)]
     pub fg_pool: bool,
+    /// Whether final-gather rays were guided by the photons (absent from stats written
+    /// before session 34, which were not: false).
+    #[serde(default)]
+    pub fg_guide: bool,
+    /// Wavelengths each camera sample followed past dispersive glass (absent from stats
+    /// written before session 34: 1).
+    #[serde(default = "one")]
+    pub glass_split: u32,
     pub photons: PhotonStats,
     pub memory_bytes: MemoryStats,
     pub bytes_per_photon: f64,
@@ -111,6 +119,8 @@ impl Stats {
             final_gather_rays: s.final_gather_rays,
             camera_samples: s.camera_samples,
             fg_pool: s.pools_gather(),
+            fg_guide: s.guides_gather(),
+            glass_split: s.glass_split,
             photons: PhotonStats {
                 emitted: st.photons_emitted,
                 caustic_emitted: st.caustic_photons_emitted,
