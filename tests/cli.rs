@@ -197,37 +197,40 @@ fn render_writes_png_exr_and_stats() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-#[test]
-fn no_fg_pool_renders_each_pixel_from_its_own_rays_and_the_stats_say_which() {
-    let dir = temp_dir("pool");
-    let run = |extra: &[&str], name: &str| {
-        let (exr, stats) = (
-            dir.join(format!("{name}.exr")),
-            dir.join(format!("{name}.json")),
-        );
-        let mut cmd = prismap();
-        cmd.args([
-            "render",
-            "cornell-box",
-            "--photons",
-            "4000",
-            "--passes",
-            "2",
-        ])
-        .args(["--size", "24x24"])
+/// `prismap render SCENE` for 2 passes of 4 000 photons at `size` with `extra` flags, into
+/// `dir/NAME.exr` with its stats: the EXR's bytes and the stats.
+fn render_with_stats(
+    dir: &std::path::Path,
+    scene: &str,
+    size: &str,
+    extra: &[&str],
+    name: &str,
+) -> (Vec<u8>, prismap::output::Stats) {
+    let (exr, stats) = (
+        dir.join(format!("{name}.exr")),
+        dir.join(format!("{name}.json")),
+    );
+    let mut cmd = prismap();
+    cmd.args(["render", scene, "--photons", "4000", "--passes", "2"])
+        .args(["--size", size])
         .args(extra)
         .arg("-o")
         .arg(&exr)
         .arg("--stats")
         .arg(&stats);
-        succeeds(&mut cmd);
-        let s: prismap::output::Stats =
-            serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
-        (std::fs::read(&exr).unwrap(), s.fg_pool)
-    };
+    succeeds(&mut cmd);
+    let s = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    (std::fs::read(&exr).unwrap(), s)
+}
+
+#[test]
+fn no_fg_pool_renders_each_pixel_from_its_own_rays_and_the_stats_say_which() {
+    let dir = temp_dir("pool");
+    let run =
+        |extra: &[&str], name: &str| render_with_stats(&dir, "cornell-box", "24x24", extra, name);
     let (pooled, on) = run(&[], "pooled");
     let (own, off) = run(&["--no-fg-pool"], "own");
-    assert!(on && !off);
+    assert!(on.fg_pool && !off.fg_pool);
     assert_ne!(pooled, own, "pooling changes the pixels' indirect light");
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -235,34 +238,22 @@ fn no_fg_pool_renders_each_pixel_from_its_own_rays_and_the_stats_say_which() {
 #[test]
 fn fg_guide_and_glass_split_change_the_prism_and_the_stats_say_so() {
     let dir = temp_dir("guide-split");
-    let run = |extra: &[&str], name: &str| {
-        let (exr, stats) = (
-            dir.join(format!("{name}.exr")),
-            dir.join(format!("{name}.json")),
-        );
-        let mut cmd = prismap();
-        cmd.args(["render", "prism", "--photons", "4000", "--passes", "2"])
-            .args(["--size", "48x27"])
-            .args(extra)
-            .arg("-o")
-            .arg(&exr)
-            .arg("--stats")
-            .arg(&stats);
-        succeeds(&mut cmd);
-        let s: prismap::output::Stats =
-            serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
-        (std::fs::read(&exr).unwrap(), s.fg_guide, s.glass_split)
-    };
-    let (default, guided, split) = run(&[], "default");
-    assert!(!guided && split == 4, "{guided} {split}");
-    let (one, _, split) = run(&["--glass-split", "1"], "one");
-    assert_eq!(split, 1);
+    let run = |extra: &[&str], name: &str| render_with_stats(&dir, "prism", "48x27", extra, name);
+    let (default, s) = run(&[], "default");
+    assert!(
+        !s.fg_guide && s.glass_split == 4,
+        "{} {}",
+        s.fg_guide,
+        s.glass_split
+    );
+    let (one, s) = run(&["--glass-split", "1"], "one");
+    assert_eq!(s.glass_split, 1);
     assert_ne!(
         default, one,
         "four wavelengths past the glass change its pixels"
     );
-    let (with_guide, guided, _) = run(&["--fg-guide"], "guided");
-    assert!(guided);
+    let (with_guide, s) = run(&["--fg-guide"], "guided");
+    assert!(s.fg_guide);
     assert_ne!(
         default, with_guide,
         "guided final-gather rays change the pixels"

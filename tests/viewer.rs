@@ -329,67 +329,41 @@ fn viewer_image_after_n_passes_equals_the_engines() {
     );
 }
 
-#[test]
-fn the_guide_toggle_restarts_with_guided_final_gather_rays() {
-    // Guiding is off by default; clicking "guide" restarts the render guided, and the
-    // viewer's image after 2 passes is the engine's with `guide_gather` on, bit for bit
-    // (the prism has guides: its walls are lit by the spot's bright patches).
-    let mut h = harness("prism");
+/// Clicks the `label` toggle on `scene` after a first pass and checks that the render
+/// restarts with the flag `field` of the settings flipped from `was`, and that the
+/// viewer's image after 2 passes is the engine's with the flag flipped, bit for bit, and
+/// not the engine's without the click.
+fn a_toggle_restarts_with_the_engines_image(
+    scene_name: &str,
+    label: &str,
+    field: fn(&mut RenderSettings) -> &mut bool,
+    was: bool,
+) {
+    let mut h = harness(scene_name);
     h.state().stop_after(Some(2));
     wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
-    assert!(!h.state().settings.guide_gather);
+    assert_eq!(
+        *field(&mut h.state().settings.clone()),
+        was,
+        "{label} starts {was}"
+    );
     let gen_before = h.state().last_restart_generation;
-    h.get_by_label("guide").click();
+    h.get_by_label(label).click();
     h.step();
     assert!(h.state().last_restart_generation > gen_before, "restarts");
-    assert!(h.state().settings.guide_gather);
-    wait_until(&mut h, "2 guided passes", |a| {
+    assert_eq!(
+        *field(&mut h.state().settings.clone()),
+        !was,
+        "{label} flips"
+    );
+    wait_until(&mut h, "2 passes after the click", |a| {
         a.last_restart_generation > gen_before && passes(a) == 2
     });
     let shown = h.state().snapshot.clone().unwrap();
-    let scene = prismap::scene::load_builtin("prism").unwrap();
-    let render = |guide_gather| {
-        let s = RenderSettings {
-            guide_gather,
-            ..h.state().settings.clone()
-        };
-        let mut engine = RenderSession::new(&scene, s).unwrap();
-        for _ in 0..2 {
-            engine.run_pass().unwrap();
-        }
-        engine.image()
-    };
-    let same = |a: &prismap::render::Image| {
-        (a.pixels.iter().zip(&shown.image.pixels))
-            .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits))
-    };
-    assert!(same(&render(true)), "the viewer renders the guided image");
-    assert!(!same(&render(false)), "which the unguided one is not");
-}
-
-#[test]
-fn the_pool_toggle_restarts_with_each_pixels_own_rays() {
-    // Pooling is on by default; clicking "pool" restarts the render unpooled, and the
-    // viewer's image after 2 passes is the engine's with `pool_gather` off, bit for bit.
-    let mut h = harness("cornell-box");
-    h.state().stop_after(Some(2));
-    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
-    assert!(h.state().settings.pool_gather);
-    let gen_before = h.state().last_restart_generation;
-    h.get_by_label("pool").click();
-    h.step();
-    assert!(h.state().last_restart_generation > gen_before, "restarts");
-    assert!(!h.state().settings.pool_gather);
-    wait_until(&mut h, "2 unpooled passes", |a| {
-        a.last_restart_generation > gen_before && passes(a) == 2
-    });
-    let shown = h.state().snapshot.clone().unwrap();
-    let scene = prismap::scene::load_builtin("cornell-box").unwrap();
-    let render = |pool_gather| {
-        let s = RenderSettings {
-            pool_gather,
-            ..h.state().settings.clone()
-        };
+    let scene = prismap::scene::load_builtin(scene_name).unwrap();
+    let render = |on: bool| {
+        let mut s = h.state().settings.clone();
+        *field(&mut s) = on;
         let mut engine = RenderSession::new(&scene, s).unwrap();
         for _ in 0..2 {
             engine.run_pass().unwrap();
@@ -401,10 +375,23 @@ fn the_pool_toggle_restarts_with_each_pixels_own_rays() {
             .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits))
     };
     assert!(
-        same(&render(false)),
-        "the viewer renders the unpooled image"
+        same(&render(!was)),
+        "the viewer renders the engine's image after the click"
     );
-    assert!(!same(&render(true)), "which the pooled one is not");
+    assert!(!same(&render(was)), "which the one before it is not");
+}
+
+#[test]
+fn the_guide_toggle_restarts_with_guided_final_gather_rays() {
+    // Guiding is off by default (the prism has guides: its walls are lit by the spot's
+    // bright patches).
+    a_toggle_restarts_with_the_engines_image("prism", "guide", |s| &mut s.guide_gather, false);
+}
+
+#[test]
+fn the_pool_toggle_restarts_with_each_pixels_own_rays() {
+    // Pooling is on by default.
+    a_toggle_restarts_with_the_engines_image("cornell-box", "pool", |s| &mut s.pool_gather, true);
 }
 
 #[test]

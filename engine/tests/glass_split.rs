@@ -3,7 +3,9 @@
 //! wavelengths a sample instead of one picked at random, so its colour noise falls,
 //! while its light stays what one wavelength a sample converges to.
 
-use prismap_engine::metrics::psnr_of_pairs;
+mod common;
+
+use common::{mean_luminance, psnr_against};
 use prismap_engine::render::{Image, RenderSession, RenderSettings};
 use prismap_engine::scene;
 
@@ -18,12 +20,7 @@ fn settings(glass_split: u32, seed: u64) -> RenderSettings {
 }
 
 fn render(s: RenderSettings, passes: usize) -> Image {
-    let scene = scene::load_builtin("prism").unwrap();
-    let mut session = RenderSession::new(&scene, s).unwrap();
-    for _ in 0..passes {
-        session.run_pass().unwrap();
-    }
-    session.image()
+    common::render(&scene::load_builtin("prism").unwrap(), s, passes)
 }
 
 /// The prism's body as the camera sees it (the top middle of the image, where the glass
@@ -36,14 +33,6 @@ fn glass(image: &Image) -> Vec<[f32; 3]> {
         .collect()
 }
 
-fn mean_luminance(pixels: &[[f32; 3]]) -> f64 {
-    let sum: f64 = pixels
-        .iter()
-        .map(|p| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
-        .sum();
-    sum / pixels.len() as f64
-}
-
 #[test]
 fn four_wavelengths_past_the_glass_lower_its_error_and_keep_its_light() {
     // The reference follows one wavelength a sample, of another seed: the split must
@@ -53,9 +42,10 @@ fn four_wavelengths_past_the_glass_lower_its_error_and_keep_its_light() {
     let reference = glass(&render(settings(1, 99), 96));
     let split = glass(&render(settings(4, 5), 8));
     let single = glass(&render(settings(1, 5), 8));
-    let exposure = (0.18 / mean_luminance(&reference)) as f32;
-    let db = |img: &[[f32; 3]]| psnr_of_pairs(img.len(), |i| (img[i], reference[i]), exposure);
-    let (s4, s1) = (db(&split), db(&single));
+    let (s4, s1) = (
+        psnr_against(&split, &reference),
+        psnr_against(&single, &reference),
+    );
     let (l4, l1, lr) = (
         mean_luminance(&split),
         mean_luminance(&single),

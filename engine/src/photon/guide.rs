@@ -60,15 +60,24 @@ pub fn peak(histogram: &[f32; CELLS], photons: usize) -> f32 {
 /// [`cosine_hemisphere`]: crate::sampling::cosine_hemisphere
 #[inline]
 pub fn cell_of(n: Vec3, d: Vec3) -> Option<usize> {
-    let z = d.dot(n);
-    if !(z > 0.0) {
+    let (x, y, u0) = in_frame(n, d)?;
+    let ring = ((u0 * RINGS as f32) as usize).min(RINGS - 1);
+    Some(ring * SECTORS + octant(x, y))
+}
+
+/// `d` in the frame [`cosine_hemisphere`] uses about `n` ([`basis`]): its tangent
+/// coordinates x and y, and x² + y² (sin²θ, the square's first coordinate); None when
+/// `d` lies below the surface (or is not finite).
+///
+/// [`cosine_hemisphere`]: crate::sampling::cosine_hemisphere
+#[inline]
+fn in_frame(n: Vec3, d: Vec3) -> Option<(f32, f32, f32)> {
+    if !(d.dot(n) > 0.0) {
         return None;
     }
     let (t, b) = basis(n);
     let (x, y) = (d.dot(t), d.dot(b));
-    let u0 = (x * x + y * y).clamp(0.0, 1.0);
-    let ring = ((u0 * RINGS as f32) as usize).min(RINGS - 1);
-    Some(ring * SECTORS + octant(x, y))
+    Some((x, y, (x * x + y * y).clamp(0.0, 1.0)))
 }
 
 /// The sector of φ = atan2(y, x) among eight of π/4 from φ = 0 (`floor(φ / (π/4))`, φ in
@@ -99,13 +108,7 @@ fn octant(x: f32, y: f32) -> usize {
 /// [`cosine_hemisphere`]: crate::sampling::cosine_hemisphere
 #[inline]
 pub fn square_of(n: Vec3, d: Vec3) -> Option<[f32; 2]> {
-    let z = d.dot(n);
-    if !(z > 0.0) {
-        return None;
-    }
-    let (t, b) = basis(n);
-    let (x, y) = (d.dot(t), d.dot(b));
-    let u0 = (x * x + y * y).clamp(0.0, 1.0);
+    let (x, y, u0) = in_frame(n, d)?;
     let mut u1 = y.atan2(x) * std::f32::consts::FRAC_1_PI * 0.5;
     if u1 < 0.0 {
         u1 += 1.0;

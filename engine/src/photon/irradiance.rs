@@ -144,6 +144,11 @@ fn guide_key(p: Vec3, n: Vec3, inv_cell: f32, level: u8) -> CellKey {
     (x, y, z, side + 6 * level)
 }
 
+/// The level a [`guide_key`] was made at.
+fn level_of(key: &CellKey) -> u8 {
+    key.3 / 6
+}
+
 /// A multiply–rotate hash for cell keys (the keys are small integers: SipHash's
 /// protection against chosen keys buys nothing here and costs a lookup's worth of time).
 #[derive(Default)]
@@ -213,7 +218,7 @@ fn guides_by_cube(
             && guide::peak(sum, *count) >= guide::MIN_PEAK
             && let Some(table) = guide::tables(sum)
         {
-            levels |= 1 << (key.3 / 6);
+            levels |= 1 << level_of(key);
             guide_cells.insert(*key, (guides.len() / guide::GUIDE_FLOATS) as u32);
             guides.extend_from_slice(&table);
         }
@@ -241,7 +246,7 @@ impl IrradianceCache {
         r_lookup: f32,
     ) -> Self {
         let n = grid.len();
-        let guided = map.keeps_incoming() && !map.is_empty();
+        let guided = map.keeps_incoming();
         // Smits triplets are kept as triplets (decoded per lookup at O(N)); colour
         // triplets would need a Jakob–Hanika decode per lookup, so their cache keeps N
         // floats per point (decoded once per point).

@@ -491,9 +491,9 @@ impl PhotonMap {
         &self.positions
     }
 
-    /// Whether the map keeps its photons' incoming directions.
+    /// Whether the map keeps its photons' incoming directions (an empty map keeps none).
     pub fn keeps_incoming(&self) -> bool {
-        !self.incoming.is_empty() || self.positions.is_empty()
+        !self.incoming.is_empty()
     }
 
     /// Where stored photon `i` came from (None when the map keeps no directions, or for a

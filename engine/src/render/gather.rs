@@ -426,11 +426,11 @@ impl Gather<'_> {
             let ways = self.glass_split.max(1);
             let origin = self.scene.camera.position;
             let primary = Split { ways, sub: false };
-            let split = self.radiance(origin, dir, spectral_u, rng, sample, s, out, primary);
+            self.radiance(origin, dir, spectral_u, rng, sample, s, out, primary);
             // Past dispersive glass the sample follows `ways` wavelengths, stratified over
             // the throughput's distribution: the other ones start where the primary
-            // picked its own (see [`Split`]).
-            if split && ways > 1 {
+            // picked its own (see [`Split`]; `s.pick` is kept only when there are more).
+            if s.pick.is_some() {
                 for i in 1..ways {
                     let u = spectral_u + i as f32 / ways as f32;
                     let u = within_unit(if u >= 1.0 { u - 1.0 } else { u });
@@ -445,9 +445,9 @@ impl Gather<'_> {
     }
 
     /// Radiance along a camera ray, added to `out`. `spectral_u` (uniform in [0, 1))
-    /// chooses the wavelength if dispersive glass splits the path; returns whether it
-    /// did. With `split.ways` > 1 the path keeps its state at that pick for the extra
-    /// wavelengths ([`Self::resume_at_pick`]; see [`Split`]).
+    /// chooses the wavelength if dispersive glass splits the path. With `split.ways` > 1
+    /// the path keeps its state at that pick in `s.pick` for the extra wavelengths
+    /// ([`Self::resume_at_pick`]; see [`Split`]).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn radiance(
@@ -460,7 +460,7 @@ impl Gather<'_> {
         s: &mut Scratch,
         out: &mut [f32],
         split: Split,
-    ) -> bool {
+    ) {
         s.throughput.fill(1.0);
         s.path_len = 0.0;
         s.pick = None;
@@ -519,8 +519,7 @@ impl Gather<'_> {
     }
 
     /// Follows a camera path from `origin` along `dir` in `state` (the throughput in
-    /// `s.throughput`), adding what it meets to `out`; returns whether it picked a
-    /// wavelength at dispersive glass.
+    /// `s.throughput`), adding what it meets to `out`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn follow(
@@ -533,7 +532,7 @@ impl Gather<'_> {
         s: &mut Scratch,
         out: &mut [f32],
         split: Split,
-    ) -> bool {
+    ) {
         let scene = self.scene;
         let PathState {
             mut spectral_u,
@@ -549,7 +548,7 @@ impl Gather<'_> {
                         *o += t * l;
                     }
                 }
-                return picked;
+                return;
             };
             let (p, nf, front) = (hit.p, hit.nf, hit.front);
             s.path_len += (p - origin).length();
@@ -587,7 +586,7 @@ impl Gather<'_> {
                         *o += t * (e * r * inv_pi);
                     }
                     s.refl = buf;
-                    return picked;
+                    return;
                 }
                 kind => {
                     self.rough_highlight(kind, &hit, dir, rng, s, out);
@@ -627,12 +626,11 @@ impl Gather<'_> {
                     }
                     match next {
                         Some((o, d)) => (origin, dir) = (o, d),
-                        None => return picked,
+                        None => return,
                     }
                 }
             }
         }
-        picked
     }
 
     /// The highlight of punctual and distant lights on a rough metal or glass, added to
