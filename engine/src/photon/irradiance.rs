@@ -1,7 +1,7 @@
 //! Precomputed irradiance (Christensen 1999, "Faster photon map global illumination"):
 //! once per pass, the irradiance of the global map is estimated at every `every`-th
-//! stored photon (its k-nearest density estimate, at the photon's own position and
-//! normal); a final-gather ray then reads the irradiance of the nearest such point on its
+//! stored photon (its k-nearest density estimate from the other photons, at the photon's
+//! own position and normal); a final-gather ray then reads the irradiance of the nearest such point on its
 //! surface instead of running a density estimate of its own. A pass makes a few tens of
 //! thousands of density estimates instead of one per final-gather ray (millions), and each
 //! ray costs one nearest-neighbour search.
@@ -278,12 +278,12 @@ impl IrradianceCache {
                 chunk
                     .iter()
                     .map(|&i| {
-                        let p = Vec3::from_array(map.positions()[i]);
                         let normal = map.normal_code(i);
                         e.fill(0.0);
                         let k = kernel.starting_at(hint);
                         let nrm = oct_decode(normal);
-                        let est = map.estimate(grid, p, nrm, k, &mut found, &mut e);
+                        // From the other photons: the point's own would bias it.
+                        let est = map.estimate_at_photon(grid, i, k, &mut found, &mut e);
                         hint = est.r_k;
                         let histogram = guided.then(|| histogram_of(map, n, nrm, &found, est.r));
                         let r = est.r.max(r_min);
