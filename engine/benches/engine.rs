@@ -29,14 +29,8 @@ fn cornell(bins: usize) -> SpectralScene {
 /// The photon pass's settings the benches trace with (no budget).
 fn photon_settings(photons: usize, storage: Storage, caustic_factor: usize) -> PhotonSettings {
     PhotonSettings {
-        photons,
-        record: storage.record(),
-        max_bounces: 1024,
-        dispersion_split: 4,
-        caustic_map: true,
         caustic_factor,
-        max_map_bytes: usize::MAX,
-        incoming: false,
+        ..PhotonSettings::new(photons, storage.record())
     }
 }
 

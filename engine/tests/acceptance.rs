@@ -73,16 +73,7 @@ fn prism_stores_spikes_and_compact_caustics_equal_full_bit_for_bit() {
         );
         assert!(spectral.has_dispersion && spectral.has_specular);
         let pass = |storage| {
-            let ps = PhotonSettings {
-                photons: 20_000,
-                record: Storage::record(storage),
-                max_bounces: 1024,
-                dispersion_split: 4,
-                caustic_map: true,
-                caustic_factor: 1,
-                max_map_bytes: usize::MAX,
-                incoming: false,
-            };
+            let ps = PhotonSettings::new(20_000, Storage::record(storage));
             trace_photons(&spectral, &ps, 3, 1, &AtomicBool::new(false)).unwrap()
         };
         let full = pass(Storage::Full);

@@ -95,6 +95,12 @@ pub struct RenderArgs {
     /// stratified (glass seen directly then shows them all instead of one at random; 1–64)
     #[arg(long)]
     pub glass_split: Option<u32>,
+    /// Do not let Suns, point lights and spots learn where their photons are useful (by
+    /// default a light whose photons mostly land where the camera never looks, such as a
+    /// Sun outside a room, emits more of them towards what it sees, weighted so nothing
+    /// changes but the noise)
+    #[arg(long)]
+    pub no_adapt_emission: bool,
     /// Camera rays per pixel per pass, spread over the pixel; the final-gather rays are
     /// shared out among them (edges and the light seen directly need many).
     #[arg(long)]
@@ -174,6 +180,7 @@ impl RenderArgs {
             guide_gather: base.guide_gather || self.fg_guide,
             camera_samples: self.samples.unwrap_or(base.camera_samples),
             glass_split: self.glass_split.unwrap_or(base.glass_split),
+            adapt_emission: base.adapt_emission && !self.no_adapt_emission,
             dispersion_split: self.split.unwrap_or(base.dispersion_split),
             caustic_factor: self.caustic_factor.unwrap_or(base.caustic_factor),
             global_k: self.global_k.unwrap_or(base.global_k),

@@ -12,6 +12,9 @@ use crate::sampling::{
 };
 use crate::spectral::spd;
 
+pub mod adaptive;
+use adaptive::EmissionCells;
+
 #[derive(Clone, Copy, Debug)]
 pub enum LightKind {
     /// An emissive triangle (one-sided, Lambertian).
@@ -257,6 +260,16 @@ impl Aim {
 
 /// A photon as it leaves a light: flux already divided by the photon count and the
 /// light's selection probability.
+/// Where a photon leaves its light ([`LightSet::emit_into`]).
+#[derive(Clone, Copy, Debug)]
+pub struct PhotonStart {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub light: usize,
+    /// A learning light's cell ([`adaptive`]), where the pass counts cells.
+    pub cell: Option<usize>,
+}
+
 pub struct Emitted {
     pub origin: Vec3,
     pub dir: Vec3,
@@ -408,6 +421,11 @@ impl LightSet {
         !self.aims.is_empty()
     }
 
+    /// Whether light `i` aims its caustic-only photons at the targets.
+    pub fn aims_light(&self, i: usize) -> bool {
+        self.aims.get(i).copied().flatten().is_some()
+    }
+
     /// The share of light `i`'s unaimed photons that would head into the targets (1 for a
     /// light that does not aim): how much denser its aimed photons are.
     pub fn share(&self, i: usize) -> f32 {
@@ -440,23 +458,28 @@ impl LightSet {
         rng: &mut Rng,
     ) -> Option<Emitted> {
         let mut flux = Vec::new();
-        let (origin, dir, _) = self.emit_into(tris, accel, photons, false, rng, &mut flux)?;
+        let start = self.emit_into(tris, accel, photons, false, None, rng, &mut flux)?;
+        let (origin, dir) = (start.origin, start.dir);
         Some(Emitted { origin, dir, flux })
     }
 
     /// [`Self::emit`] with the flux written into `flux` (resized to the bins; no
-    /// allocation once it has been): returns the photon's origin, direction and light.
+    /// allocation once it has been): returns the photon's start and light.
     /// `aimed`: a caustic-only photon, from a light chosen by [`Self::aimed_pmf`] and aimed
-    /// at the targets where that light aims ([`Self::aim_at`]).
+    /// at the targets where that light aims ([`Self::aim_at`]). `cells`: the pass's
+    /// learned emission ([`adaptive`]), for photons that are not aimed; a learning
+    /// light's photon then reports its cell.
+    #[allow(clippy::too_many_arguments)]
     pub fn emit_into(
         &self,
         tris: &[TriData],
         accel: &Accel,
         photons: usize,
         aimed: bool,
+        cells: Option<&EmissionCells>,
         rng: &mut Rng,
         flux: &mut Vec<f32>,
-    ) -> Option<(Vec3, Vec3, usize)> {
+    ) -> Option<PhotonStart> {
         use std::f32::consts::PI;
         if self.lights.is_empty() {
             return None;
@@ -475,6 +498,7 @@ impl LightSet {
         let aim = if aimed { self.aims[li] } else { None };
         let targets = &self.targets[..];
         let fixed_cones = |aim: Aim| Some(&self.cones.get(aim.cones? as usize)?[..targets.len()]);
+        let mut cell = None;
         let (origin, dir, weight) = match (light.kind, aim) {
             (LightKind::Point { position }, Some(aim)) => {
                 let (dir, solid_angle) = sample_cones(fixed_cones(aim)?, rng);
@@ -534,12 +558,88 @@ impl LightSet {
                 let (origin, area) = sample_discs(targets, dir, center - dir * radius, rng);
                 (origin, dir, 4.0 * PI * area)
             }
+            (kind, None) if cells.is_some_and(|c| c.learns(li)) => {
+                let cells = cells?;
+                let (origin, dir, weight, c) = match cells.sample(li, rng) {
+                    Some(s) => {
+                        let (origin, dir, weight) = Self::emit_at(&kind, s.u, true);
+                        (origin, dir, weight * s.factor, s.cell)
+                    }
+                    // As unaimed (the same draws), the photon's cell found after.
+                    None => {
+                        let u = rng.next_2d();
+                        let (origin, dir, weight) = Self::emit_at(&kind, u, false);
+                        let cell = match kind {
+                            LightKind::Distant {
+                                dir,
+                                center,
+                                radius,
+                            } => adaptive::cell_of(adaptive::square_point(
+                                dir,
+                                radius,
+                                origin - (center - dir * radius),
+                            )),
+                            _ => adaptive::cell_of(u),
+                        };
+                        (origin, dir, weight, cell)
+                    }
+                };
+                cell = Some(c);
+                (origin, dir, weight)
+            }
             (kind, _) => Self::emit_unaimed(&kind, tris, accel, rng),
         };
         flux.clear();
         flux.extend_from_slice(&light.spectrum);
         spd::scale(flux, weight / (pmf * photons as f32));
-        Some((origin, dir, li))
+        Some(PhotonStart {
+            origin,
+            dir,
+            light: li,
+            cell,
+        })
+    }
+
+    /// A learning light's photon ([`adaptive::learns`]: a distant light, a point light or
+    /// a spot) from the point `u` of its emission square, as [`Self::emit_unaimed`]
+    /// places it (a distant light from its disc), or with `square` from a distant
+    /// light's start square ([`adaptive::square_start`]).
+    #[inline(always)]
+    fn emit_at(kind: &LightKind, u: [f32; 2], square: bool) -> (Vec3, Vec3, f32) {
+        use std::f32::consts::PI;
+        match *kind {
+            LightKind::Point { position } => (position, uniform_sphere(u), 4.0 * PI),
+            LightKind::Spot {
+                position,
+                axis,
+                omc_outer,
+                omc_inner,
+            } => {
+                let dir = uniform_cone(axis, omc_outer, u);
+                let solid_angle = 2.0 * PI * omc_outer;
+                let falloff = spot_falloff(one_minus_cos_between(dir, axis), omc_outer, omc_inner);
+                (position, dir, solid_angle * falloff)
+            }
+            LightKind::Distant {
+                dir,
+                center,
+                radius,
+            } if square => {
+                let (origin, area) = adaptive::square_start(dir, center, radius, u);
+                (origin, dir, area)
+            }
+            LightKind::Distant {
+                dir,
+                center,
+                radius,
+            } => {
+                // A disc of the bounding sphere's radius, one radius behind its centre.
+                let origin = center - dir * radius + disc_point(dir, radius, u);
+                (origin, dir, PI * radius * radius)
+            }
+            // Not learning lights: emitted by `emit_unaimed`.
+            LightKind::Area { .. } | LightKind::Environment { .. } => (Vec3::ZERO, Vec3::Z, 0.0),
+        }
     }
 
     /// A photon's start, direction and weight (the flux per unit of the light's spectrum)
@@ -561,30 +661,8 @@ impl LightSet {
                 let origin = accel.offset(p, t.normal, dir);
                 (origin, dir, std::f32::consts::PI * t.area)
             }
-            LightKind::Point { position } => (
-                position,
-                uniform_sphere(rng.next_2d()),
-                4.0 * std::f32::consts::PI,
-            ),
-            LightKind::Spot {
-                position,
-                axis,
-                omc_outer,
-                omc_inner,
-            } => {
-                let dir = uniform_cone(axis, omc_outer, rng.next_2d());
-                let solid_angle = 2.0 * std::f32::consts::PI * omc_outer;
-                let falloff = spot_falloff(one_minus_cos_between(dir, axis), omc_outer, omc_inner);
-                (position, dir, solid_angle * falloff)
-            }
-            LightKind::Distant {
-                dir,
-                center,
-                radius,
-            } => {
-                // A disc of the bounding sphere's radius, one radius behind its centre.
-                let origin = center - dir * radius + disc_point(dir, radius, rng.next_2d());
-                (origin, dir, PI * radius * radius)
+            LightKind::Point { .. } | LightKind::Spot { .. } | LightKind::Distant { .. } => {
+                Self::emit_at(kind, rng.next_2d(), false)
             }
             LightKind::Environment { center, radius } => {
                 // Direction uniform on the sphere, start point uniform on the disc across
@@ -880,8 +958,9 @@ mod tests {
                 let mut flux = Vec::new();
                 for i in 0..photons {
                     let mut rng = Rng::stream(3, 1, i as u64, Purpose::Photon);
-                    if let Some((o, d, _)) =
-                        set.emit_into(&tris, &accel, photons, aimed, &mut rng, &mut flux)
+                    if let Some(PhotonStart {
+                        origin: o, dir: d, ..
+                    }) = set.emit_into(&tris, &accel, photons, aimed, None, &mut rng, &mut flux)
                     {
                         left += 1;
                         if meets(targets, o, d) {
@@ -968,8 +1047,8 @@ mod tests {
         for i in 0..n {
             let mut rng =
                 crate::sampling::Rng::stream(5, 1, i as u64, crate::sampling::Purpose::Photon);
-            if let Some((_, _, li)) = set.emit_into(&tris, &accel, n, true, &mut rng, &mut flux) {
-                counts[li] += 1;
+            if let Some(start) = set.emit_into(&tris, &accel, n, true, None, &mut rng, &mut flux) {
+                counts[start.light] += 1;
             }
         }
         let drawn = (counts[0] + counts[1]) as f64;

@@ -66,6 +66,14 @@ pub struct PhotonStats {
     pub stored_caustic_total: u64,
     pub spike_records_total: u64,
     pub dispersion_splits: u64,
+    /// Whether the last pass's Suns, point lights or spots emitted by learned tables
+    /// (absent from stats written before session 35: false).
+    #[serde(default)]
+    pub emission_adapted: bool,
+    /// Of the last pass's photons from those lights, the share that reached a surface the
+    /// camera sees (null where no light learns).
+    #[serde(default)]
+    pub emission_useful_share: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -133,6 +141,8 @@ impl Stats {
                 stored_caustic_total: st.stored_caustic_total,
                 spike_records_total: st.spike_records_total,
                 dispersion_splits: st.dispersion_splits,
+                emission_adapted: st.emission_adapted,
+                emission_useful_share: st.emission_useful_share,
             },
             memory_bytes: MemoryStats {
                 global_map: mem.global_map,

@@ -121,9 +121,9 @@ fn thin_out(map: &PhotonMap, every: usize, inv_cell: f32) -> Vec<usize> {
 
 /// A cube of the cell grid and a surface orientation class (dominant axis and sign of
 /// the normal, 0–5).
-type CellKey = (i32, i32, i32, u8);
+pub(super) type CellKey = (i32, i32, i32, u8);
 
-fn cell_key(p: Vec3, n: Vec3, inv_cell: f32) -> CellKey {
+pub(super) fn cell_key(p: Vec3, n: Vec3, inv_cell: f32) -> CellKey {
     let a = n.abs();
     let axis = if a.x >= a.y && a.x >= a.z {
         0

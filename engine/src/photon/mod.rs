@@ -8,6 +8,7 @@ pub mod map;
 pub mod occupancy;
 pub mod record;
 pub mod trace;
+pub mod visibility;
 
 pub use irradiance::IrradianceCache;
 pub use map::{Estimate, Kernel, PhotonBatch, PhotonMap};

@@ -11,6 +11,7 @@
 //! bin j with probability S·|I_j ∩ stratum|, so E[flux_j] = Σ/S · S · flux_j/Σ = flux_j.
 //! Split photons carry comparable power (Σ/S), as the paper recommends.
 
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use glam::Vec3;
@@ -18,7 +19,9 @@ use rayon::prelude::*;
 
 use super::map::{IncomingCode, PhotonBatch, PhotonMap};
 use super::record::Record;
+use super::visibility::VisibleSurfaces;
 use crate::lights::LightSet;
+use crate::lights::adaptive::{self, EmissionCells};
 use crate::materials::{
     dielectric_bounce, metal_bounce, russian_roulette, russian_roulette_metal,
     russian_roulette_scalar, russian_roulette_single,
@@ -51,6 +54,37 @@ pub struct PhotonSettings {
     /// Keep each global photon's incoming direction ([`IncomingCode`], 2 bytes a photon),
     /// which guided final gathering reads.
     pub incoming: bool,
+    /// Learned emission ([`crate::lights::adaptive`]): the global photons of learning
+    /// lights are emitted by these cells and report their cell and whether they reached a
+    /// visible surface ([`PhotonPass::reports`]).
+    pub adapt: Option<AdaptiveEmission>,
+}
+
+/// What learned emission needs in a pass: the cells to emit by, and the surfaces that
+/// make a photon useful.
+#[derive(Clone, Debug)]
+pub struct AdaptiveEmission {
+    pub cells: Arc<EmissionCells>,
+    pub visible: Arc<VisibleSurfaces>,
+}
+
+impl PhotonSettings {
+    /// `photons` global photons stored as `record`, with a caustic map from them alone
+    /// (no extra caustic photons), dispersive splits into 4, no budget, no incoming
+    /// directions and no learned emission.
+    pub fn new(photons: usize, record: Record) -> Self {
+        Self {
+            photons,
+            record,
+            max_bounces: 1024,
+            dispersion_split: 4,
+            caustic_map: true,
+            caustic_factor: 1,
+            max_map_bytes: usize::MAX,
+            incoming: false,
+            adapt: None,
+        }
+    }
 }
 
 /// What one photon pass produced.
@@ -64,6 +98,9 @@ pub struct PhotonPass {
     /// [`crate::lights::LightSet::aim_at`]).
     pub caustic_aimed: bool,
     pub splits: u64,
+    /// Per global photon of a learning light, in emission order: its light, cell and
+    /// whether it was useful ([`adaptive::report`]); empty without learned emission.
+    pub reports: Vec<u32>,
 }
 
 /// Why a photon pass stopped early.
@@ -178,7 +215,7 @@ pub fn trace_photons(
     let chunks = caustic_photons.div_ceil(CHUNK);
     let used = AtomicUsize::new(0);
     let over = AtomicBool::new(false);
-    let results: Vec<Option<(PhotonBatch, PhotonBatch, u64)>> = (0..chunks)
+    let results: Vec<Option<ChunkResult>> = (0..chunks)
         .into_par_iter()
         .map(|c| {
             if cancel.load(Ordering::Relaxed) || over.load(Ordering::Relaxed) {
@@ -190,6 +227,7 @@ pub fn trace_photons(
             let start = c * CHUNK;
             let end = (start + CHUNK).min(caustic_photons);
             let mut scratch = TraceScratch::default();
+            let mut reports = Vec::new();
             let chunk = Chunk {
                 scene,
                 settings,
@@ -200,13 +238,13 @@ pub fn trace_photons(
                 pass,
             };
             let maps = (&mut global, &mut caustics);
-            splits += chunk.trace(start..end, maps, &mut scratch);
+            splits += chunk.trace(start..end, maps, &mut scratch, &mut reports);
             let bytes = global.memory_bytes() + caustics.memory_bytes();
             if used.fetch_add(bytes, Ordering::Relaxed) + bytes > settings.max_map_bytes {
                 over.store(true, Ordering::Relaxed);
                 return None;
             }
-            Some((global, caustics, splits))
+            Some((global, caustics, splits, reports))
         })
         .collect();
     if over.load(Ordering::Relaxed) {
@@ -215,17 +253,17 @@ pub fn trace_photons(
     let mut global = PhotonBatch::new(settings.record, &scene.grid);
     let mut caustics = PhotonBatch::new(settings.record, &scene.grid);
     // One allocation each (growing by doubling faulted in fresh pages every pass).
-    let count = |pick: fn(&(PhotonBatch, PhotonBatch, u64)) -> usize| {
-        results.iter().flatten().map(pick).sum::<usize>()
-    };
+    let count = |pick: fn(&ChunkResult) -> usize| results.iter().flatten().map(pick).sum::<usize>();
     global.reserve(count(|r| r.0.len()));
     caustics.reserve(count(|r| r.1.len()));
+    let mut reports = Vec::with_capacity(count(|r| r.3.len()));
     let mut splits = 0;
     for r in results {
-        let (g, c, s) = r.ok_or(TraceStop::Cancelled)?;
+        let (g, c, s, rep) = r.ok_or(TraceStop::Cancelled)?;
         global.append(g);
         caustics.append(c);
         splits += s;
+        reports.extend_from_slice(&rep);
     }
     if cancel.load(Ordering::Relaxed) {
         return Err(TraceStop::Cancelled);
@@ -241,8 +279,12 @@ pub fn trace_photons(
         caustic_emitted: (caustic_photons - settings.photons) as u64,
         caustic_aimed: aimed,
         splits,
+        reports,
     })
 }
+
+/// A chunk's global and caustic photons, splits and reports.
+type ChunkResult = (PhotonBatch, PhotonBatch, u64, Vec<u32>);
 
 /// What a chunk's photons reuse: the path stack, spare flux buffers (a path's buffer
 /// goes back here when it ends, and split pieces come from here) and a texel buffer. No
@@ -278,13 +320,14 @@ impl Chunk<'_> {
         ids: std::ops::Range<usize>,
         maps: (&mut PhotonBatch, &mut PhotonBatch),
         scratch: &mut TraceScratch,
+        reports: &mut Vec<u32>,
     ) -> u64 {
         #[cfg(target_arch = "x86_64")]
         if crate::cpu::has_avx() {
             // SAFETY: the CPU has AVX (checked just above).
-            return unsafe { self.trace_avx(ids, maps, scratch) };
+            return unsafe { self.trace_avx(ids, maps, scratch, reports) };
         }
-        self.trace_in(ids, maps, scratch)
+        self.trace_in(ids, maps, scratch, reports)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -294,8 +337,9 @@ impl Chunk<'_> {
         ids: std::ops::Range<usize>,
         maps: (&mut PhotonBatch, &mut PhotonBatch),
         scratch: &mut TraceScratch,
+        reports: &mut Vec<u32>,
     ) -> u64 {
-        self.trace_in(ids, maps, scratch)
+        self.trace_in(ids, maps, scratch, reports)
     }
 
     #[inline(always)]
@@ -304,6 +348,7 @@ impl Chunk<'_> {
         ids: std::ops::Range<usize>,
         (global, caustics): (&mut PhotonBatch, &mut PhotonBatch),
         scratch: &mut TraceScratch,
+        reports: &mut Vec<u32>,
     ) -> u64 {
         let mut splits = 0;
         for i in ids {
@@ -312,13 +357,17 @@ impl Chunk<'_> {
             let role = (self.roles[r], &self.caustic_scales[r][..]);
             let maps = (&mut *global, &mut *caustics);
             let (scene, settings) = (self.scene, self.settings);
-            splits += trace_one(scene, settings, self.caustic, role, &mut rng, maps, scratch);
+            let (s, report) =
+                trace_one(scene, settings, self.caustic, role, &mut rng, maps, scratch);
+            splits += s;
+            reports.extend(report);
         }
         splits
     }
 }
 
-/// Emits and traces one photon; returns the number of dispersive splits.
+/// Emits and traces one photon; returns the number of dispersive splits and, for a
+/// learning light's global photon, its report ([`adaptive::report`]).
 #[inline(always)]
 fn trace_one(
     scene: &SpectralScene,
@@ -328,7 +377,7 @@ fn trace_one(
     rng: &mut Rng,
     (global, caustics): (&mut PhotonBatch, &mut PhotonBatch),
     scratch: &mut TraceScratch,
-) -> u64 {
+) -> (u64, Option<u32>) {
     let TraceScratch {
         stack,
         spare,
@@ -337,14 +386,25 @@ fn trace_one(
     } = scratch;
     let mut flux = spare.pop().unwrap_or_default();
     let among = role.emitted_among;
-    let Some((origin, dir, light)) =
-        scene
-            .lights
-            .emit_into(&scene.tris, &scene.accel, among, role.aimed, rng, &mut flux)
-    else {
+    let adapt = settings.adapt.as_ref().filter(|_| role.global);
+    let cells = adapt.map(|a| &*a.cells);
+    let lights = &scene.lights;
+    let Some(start) = lights.emit_into(
+        &scene.tris,
+        &scene.accel,
+        among,
+        role.aimed,
+        cells,
+        rng,
+        &mut flux,
+    ) else {
         spare.push(flux);
-        return 0;
+        return (0, None);
     };
+    let (origin, dir, light) = (start.origin, start.dir, start.light);
+    // Where this photon's cell is counted: whether any of its records is seen.
+    let visible = adapt.filter(|_| start.cell.is_some()).map(|a| &*a.visible);
+    let mut useful = false;
     let caustic_scale = caustic_scales[light];
     stack.push(Path {
         origin,
@@ -394,6 +454,9 @@ fn trace_one(
                     }
                     let before = global.len();
                     store(global, 1.0);
+                    if let Some(v) = visible {
+                        useful = useful || v.contains(p, nf);
+                    }
                     if settings.incoming {
                         // Light a final-gather ray could find here came straight off a
                         // diffuse surface (see `IncomingCode`). Light through glass or off
@@ -496,7 +559,8 @@ fn trace_one(
         }
         spare.push(path.flux);
     }
-    splits
+    let report = start.cell.map(|c| adaptive::report(light, c, useful));
+    (splits, report)
 }
 
 /// The two numbers a rough surface samples its microfacet normal with; none drawn for a
@@ -577,14 +641,8 @@ mod tests {
             let scene =
                 SpectralScene::new(&scene, crate::spectral::BinGrid::with_bins(bins).unwrap());
             let settings = PhotonSettings {
-                photons: 2_000,
-                record,
-                max_bounces: 1024,
-                dispersion_split: 4,
-                caustic_map: true,
                 caustic_factor: 4,
-                max_map_bytes: usize::MAX,
-                incoming: false,
+                ..PhotonSettings::new(2_000, record)
             };
             // The prism's ceiling panel aims its caustic-only photons at the glass.
             let (_, roles, scales) = roles(2_000, 4, &scene.lights);
@@ -604,9 +662,9 @@ mod tests {
                 let mut scratch = TraceScratch::default();
                 let splits = if avx {
                     // SAFETY: the CPU has AVX (checked above).
-                    unsafe { chunk.trace_avx(0..8_000, (g, c), &mut scratch) }
+                    unsafe { chunk.trace_avx(0..8_000, (g, c), &mut scratch, &mut Vec::new()) }
                 } else {
-                    chunk.trace_in(0..8_000, (g, c), &mut scratch)
+                    chunk.trace_in(0..8_000, (g, c), &mut scratch, &mut Vec::new())
                 };
                 (format!("{maps:?}"), splits, maps[0].len() + maps[1].len())
             };

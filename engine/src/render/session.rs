@@ -17,6 +17,9 @@ use rayon::prelude::*;
 use super::film::{Film, Image, SpectralFilm};
 use super::gather::{Gather, GatherSequence, Scratch};
 use super::settings::{RenderSettings, SettingsError, default_photon_budget};
+use crate::lights::adaptive::EmissionLearner;
+use crate::photon::trace::AdaptiveEmission;
+use crate::photon::visibility::VisibleSurfaces;
 use crate::photon::{
     IrradianceCache, Kernel, PhotonPass, PhotonSettings, Storage, TraceStop, trace_photons,
 };
@@ -134,6 +137,11 @@ pub struct RenderStats {
     pub photons_last_pass: u64,
     /// Why photons per pass were lowered, if they were.
     pub budget_note: Option<String>,
+    /// Whether the latest pass emitted by learned tables ([`crate::lights::adaptive`]).
+    pub emission_adapted: bool,
+    /// Of the latest pass's photons from learning lights, the share that reached a
+    /// surface the camera sees (None where no light learns).
+    pub emission_useful_share: Option<f64>,
 }
 
 pub struct RenderSession {
@@ -165,6 +173,11 @@ pub struct RenderSession {
     /// Whether the gather runs its AVX copy ([`Gather::avx`]): where the CPU has AVX;
     /// off in the test that compares the two.
     avx: bool,
+    /// Learned emission's counts over the passes so far ([`crate::lights::adaptive`]):
+    /// None when it is off or no light learns.
+    learner: Option<EmissionLearner>,
+    /// What the camera sees, probed before the first pass where a light learns.
+    visible: Option<Arc<VisibleSurfaces>>,
 }
 
 /// The global map's search cap, in typical radii and as a fraction of the scene diagonal
@@ -247,7 +260,19 @@ impl RenderSession {
             guides: std::sync::OnceLock::new(),
             caustic_reuse: super::gather::CAUSTIC_REUSE,
             avx: crate::cpu::has_avx(),
+            learner: None,
+            visible: None,
         }
+        .learning()
+    }
+
+    /// This session with learned emission set up, where the settings ask for it and a
+    /// light of the scene learns.
+    fn learning(mut self) -> Self {
+        if self.settings.adapt_emission {
+            self.learner = EmissionLearner::new(&self.scene.lights);
+        }
+        self
     }
 
     /// Keeps the spectrum of these pixels from the next pass on (others are dropped;
@@ -381,13 +406,22 @@ impl RenderSession {
         }
         let start = Instant::now();
         let pass = self.film.passes() + 1;
+        if self.learner.is_some() && self.visible.is_none() {
+            let (w, h, seed) = (
+                self.settings.width,
+                self.settings.height,
+                self.settings.seed,
+            );
+            self.visible = Some(Arc::new(VisibleSurfaces::probe(&self.scene, w, h, seed)));
+        }
         let (prepared, overlapped) = match self.next.take() {
             Some(p) => {
                 let seconds = p.seconds;
                 (p, seconds)
             }
             None => {
-                let (maps, photons, note) = self.trace_within_budget(pass)?;
+                let learner = self.learner.as_ref();
+                let (maps, photons, note) = self.trace_within_budget(pass, learner)?;
                 let r1 = (self.r1_global, self.r1_caustic);
                 let p = self.prepare(maps, photons, note, r1, self.radius_sq_factor, start);
                 (p, 0.0)
@@ -415,16 +449,29 @@ impl RenderSession {
             avx: self.avx,
         };
         let next_factor = next_radius_sq_factor(self.radius_sq_factor, pass, self.settings.alpha);
+        // What the next pass emits by: the counts of every pass up to this one (kept only
+        // if this pass completes, so a cancelled pass leaves no trace).
+        let learned = self
+            .learner
+            .as_ref()
+            .map(|l| l.learned(&prepared.maps.reports));
         let (gathered, next) = if trace_next {
             let this = &*self;
+            let learned = learned.as_ref();
             rayon::join(
                 || this.gather_image(&gather, pass),
-                || this.trace_ahead(pass + 1, &prepared, next_factor),
+                || this.trace_ahead(pass + 1, &prepared, next_factor, learned),
             )
         } else {
             (self.gather_image(&gather, pass), None)
         };
         let (image, probe_spectra, all_spectra) = gathered?;
+        if let Some(l) = learned {
+            // This pass emitted by the tables of the learner it replaces.
+            self.stats.emission_adapted = self.learner.as_ref().is_some_and(|l| l.adapted());
+            self.stats.emission_useful_share = l.useful_share();
+            self.learner = Some(l);
+        }
         self.film.add_pass(&image);
         self.add_probe_spectra(probe_spectra);
         if let Some(s) = &mut self.spectra {
@@ -460,7 +507,18 @@ impl RenderSession {
         }
     }
 
-    fn photon_settings(&self, photons: usize, max_map_bytes: usize) -> PhotonSettings {
+    fn photon_settings(
+        &self,
+        photons: usize,
+        max_map_bytes: usize,
+        learner: Option<&EmissionLearner>,
+    ) -> PhotonSettings {
+        let adapt = learner
+            .zip(self.visible.as_ref())
+            .map(|(l, v)| AdaptiveEmission {
+                cells: l.cells(),
+                visible: Arc::clone(v),
+            });
         PhotonSettings {
             photons,
             record: self.settings.storage.record(),
@@ -470,6 +528,7 @@ impl RenderSession {
             caustic_factor: self.settings.caustic_factor,
             max_map_bytes,
             incoming: self.settings.guides_gather(),
+            adapt,
         }
     }
 
@@ -490,11 +549,12 @@ impl RenderSession {
     fn trace_within_budget(
         &self,
         pass: u64,
+        learner: Option<&EmissionLearner>,
     ) -> Result<(PhotonPass, usize, Option<String>), RenderError> {
         let budget = self.budget();
         let mut photons = self.photons_to_try(self.bytes_per_emitted);
         let maps = loop {
-            let photon_settings = self.photon_settings(photons, budget);
+            let photon_settings = self.photon_settings(photons, budget, learner);
             let seed = self.settings.seed;
             match trace_photons(&self.scene, &photon_settings, seed, pass, &self.cancel) {
                 Ok(m) => break m,
@@ -515,6 +575,7 @@ impl RenderSession {
         pass: u64,
         current: &Prepared,
         radius_sq_factor: f64,
+        learner: Option<&EmissionLearner>,
     ) -> Option<Prepared> {
         let start = Instant::now();
         let bytes_per_emitted = current.bytes_per_emitted();
@@ -523,7 +584,7 @@ impl RenderSession {
         if photons as f64 * bytes_per_emitted > left as f64 {
             return None; // would not fit beside this pass's maps: not worth trying
         }
-        let settings = self.photon_settings(photons, left);
+        let settings = self.photon_settings(photons, left, learner);
         let maps = trace_photons(
             &self.scene,
             &settings,

@@ -43,6 +43,13 @@ pub struct RenderSettings {
     /// picked at random. 1 follows one.
     #[serde(default = "default_glass_split")]
     pub glass_split: u32,
+    /// Distant lights, point lights and spots learn where their photons are useful (on
+    /// surfaces the camera sees, or one bounce from them) and emit more of them there,
+    /// each weighted so that every pass stays unbiased (`--no-adapt-emission` turns it
+    /// off; see [`crate::lights::adaptive`]). Only a light of which fewer than half the
+    /// photons proved useful adapts.
+    #[serde(default = "yes")]
+    pub adapt_emission: bool,
     /// Safety cap on the bounces of any path, photon or camera. Paths end by Russian
     /// roulette on the reflectance (unbiased); the cap only stops paths that lose no energy
     /// (light trapped by total internal reflection, lossless mirrors). At the default 1024
@@ -117,6 +124,7 @@ impl Default for RenderSettings {
             guide_gather: false,
             camera_samples: DEFAULT_CAMERA_SAMPLES,
             glass_split: DEFAULT_GLASS_SPLIT,
+            adapt_emission: true,
             max_bounces: DEFAULT_MAX_BOUNCES,
             alpha: 2.0 / 3.0,
             global_radius: None,

@@ -15,6 +15,8 @@ pub enum Purpose {
     Camera = 2,
     /// A pixel's sequence scrambles (one pair per pixel: odd passes, even passes).
     Gather = 3,
+    /// The rays that find what the camera sees, for learned emission.
+    Visibility = 4,
 }
 
 /// PCG32 (O'Neill 2014, XSH-RR).
