@@ -880,3 +880,36 @@ fn the_statistics_say_when_caustic_photons_are_aimed_at_the_glass() {
     assert!(h.query_by_label("+ aimed at glass").is_none());
     assert!(h.query_by_label("+ for caustics").is_none());
 }
+
+#[test]
+fn the_statistics_show_the_share_of_useful_photons_and_whether_emission_learned() {
+    // A Sun through a roof window: few of its photons land where the camera looks, so its
+    // emission learns within a few passes and the panel says so with the pass's share. The
+    // Cornell box's area light does not learn: no row.
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/fixtures/sunlit-room.gltf");
+    let ctx = egui::Context::default();
+    let app = ViewerApp::new(&ctx, SceneSource::File(path), settings(), None);
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1400.0, 1000.0))
+        .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app);
+    wait_until(&mut h, "learned emission", |a| {
+        a.snapshot
+            .as_ref()
+            .is_some_and(|s| s.stats.emission_adapted)
+    });
+    h.key_press(egui::Key::Space);
+    h.run_steps(4);
+    let st = h.state().snapshot.clone().unwrap().stats;
+    let share = st
+        .emission_useful_share
+        .expect("a Sun counts its useful photons");
+    assert!(share > 0.0 && share < 1.0, "share {share}");
+    h.get_by_label("useful photons (learned)");
+    h.get_by_label(&format!("{:.0} %", 100.0 * share));
+    let mut h = harness("cornell-box");
+    wait_until(&mut h, "a first pass", |a| passes(a) >= 1);
+    h.step();
+    assert!(h.query_by_label("useful photons (learned)").is_none());
+    assert!(h.query_by_label("useful photons").is_none());
+}

@@ -432,6 +432,15 @@ pub fn statistics(app: &mut ViewerApp, ui: &mut egui::Ui) {
                             };
                             row(label, st.caustic_photons_emitted.to_string());
                         }
+                        if let Some(share) = st.emission_useful_share {
+                            // Suns, point lights and spots count where their photons land.
+                            let label = if st.emission_adapted {
+                                "useful photons (learned)"
+                            } else {
+                                "useful photons"
+                            };
+                            row(label, format!("{:.0} %", 100.0 * share));
+                        }
                         row("stored (global)", st.stored_global.to_string());
                         row("stored (caustic)", st.stored_caustic.to_string());
                         row("spike records", st.spike_records.to_string());
