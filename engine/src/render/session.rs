@@ -191,6 +191,25 @@ const GLOBAL_CAP_DIAGONAL: f32 = 0.02;
 /// of another seed) — and each pass is cheaper, so per second every
 /// 16th is as good or better (spot-lit stage: 29.20 dB at 5.8 s, every 8th ≈ 29.1 dB).
 pub const PRECOMPUTE_EVERY: usize = 16;
+
+/// The photon step of a pass's irradiance cache: [`PRECOMPUTE_EVERY`] at the first pass,
+/// then in proportion to the pass's Knaus–Zwicker `shrink` (r_i / r_1), at least 1.
+/// A final-gather ray reads its nearest point, and points sit at photons, which crowd
+/// where irradiance is high: next to a bright patch the nearest point lies on the bright
+/// side more often than not, by about half the dark side's point spacing. That bias does
+/// not average out over passes (each pass's points are its own photons); it shrinks only
+/// with the spacing. A fixed step left a sun-lit room's walls 7.5 % bright at 25 000
+/// photons a pass after 20 passes and after 80 alike; a step falling as the radius
+/// shrinks makes the spacing (√step photon spacings) go to 0 with it, so the cache's
+/// bias goes as the density estimates' own (BENCHMARKS.md, session 36).
+pub fn precompute_every(shrink: f32) -> usize {
+    let step = PRECOMPUTE_EVERY as f32 * shrink;
+    if step.is_finite() {
+        (step.round() as usize).clamp(1, PRECOMPUTE_EVERY)
+    } else {
+        PRECOMPUTE_EVERY
+    }
+}
 /// The caustic map's search cap, in typical radii: the radius shrinks where caustic
 /// photons are dense (a sharper caustic) but does not widen beyond its start, so a query
 /// far from every caustic costs one small search.
@@ -617,13 +636,13 @@ impl RenderSession {
     ) -> Prepared {
         let (r1, kernels, typical) = self.kernels(&maps, r1, radius_sq_factor);
         // Final-gather rays read precomputed irradiance (one density estimate per
-        // `PRECOMPUTE_EVERY` photons instead of one per ray).
+        // `precompute_every` photons instead of one per ray).
         let irradiance = (self.settings.final_gather_rays > 0).then(|| {
             IrradianceCache::build(
                 &maps.global,
                 &self.scene.grid,
                 kernels.0,
-                PRECOMPUTE_EVERY,
+                precompute_every(kernels.0.shrink),
                 self.r_min(),
                 kernels.0.r_max,
             )
