@@ -22,10 +22,15 @@ fn settings() -> RenderSettings {
 }
 
 fn harness(scene: &str) -> Harness<'static, ViewerApp> {
+    harness_of(SceneSource::Builtin(scene.into()), 1400.0, 1000.0)
+}
+
+/// The viewer on `source` with the tests' settings, in a `w` × `h` window.
+fn harness_of(source: SceneSource, w: f32, h: f32) -> Harness<'static, ViewerApp> {
     let ctx = egui::Context::default();
-    let app = ViewerApp::new(&ctx, SceneSource::Builtin(scene.into()), settings(), None);
+    let app = ViewerApp::new(&ctx, source, settings(), None);
     Harness::builder()
-        .with_size(egui::vec2(1400.0, 1000.0))
+        .with_size(egui::vec2(w, h))
         .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app)
 }
 
@@ -616,11 +621,7 @@ fn the_main_controls_explain_themselves_on_hover() {
 }
 
 fn harness_sized(scene: &str, w: f32, h: f32) -> Harness<'static, ViewerApp> {
-    let ctx = egui::Context::default();
-    let app = ViewerApp::new(&ctx, SceneSource::Builtin(scene.into()), settings(), None);
-    Harness::builder()
-        .with_size(egui::vec2(w, h))
-        .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app)
+    harness_of(SceneSource::Builtin(scene.into()), w, h)
 }
 
 #[test]
@@ -888,11 +889,7 @@ fn the_statistics_show_the_share_of_useful_photons_and_whether_emission_learned(
     // Cornell box's area light does not learn: no row.
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/fixtures/sunlit-room.gltf");
-    let ctx = egui::Context::default();
-    let app = ViewerApp::new(&ctx, SceneSource::File(path), settings(), None);
-    let mut h = Harness::builder()
-        .with_size(egui::vec2(1400.0, 1000.0))
-        .build_ui_state(|ui, app: &mut ViewerApp| app.ui(ui), app);
+    let mut h = harness_of(SceneSource::File(path), 1400.0, 1000.0);
     wait_until(&mut h, "learned emission", |a| {
         a.snapshot
             .as_ref()

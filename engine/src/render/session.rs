@@ -210,6 +210,7 @@ pub fn precompute_every(shrink: f32) -> usize {
         PRECOMPUTE_EVERY
     }
 }
+
 /// The caustic map's search cap, in typical radii: the radius shrinks where caustic
 /// photons are dense (a sharper caustic) but does not widen beyond its start, so a query
 /// far from every caustic costs one small search.
