@@ -9,6 +9,10 @@
 //! included), time from a setting change to the first updated image, and passes per
 //! second of the background worker.
 
+/// The product's allocator (glibc's would add page faults the product does not have).
+#[path = "../src/allocator.rs"]
+mod allocator;
+
 use std::time::{Duration, Instant};
 
 use egui_kittest::Harness;
@@ -22,6 +26,7 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
 }
 
 fn main() {
+    allocator::keep_freed_memory();
     let seconds: f64 = std::env::var("PRISMAP_BENCH_SECONDS")
         .ok()
         .and_then(|s| s.parse().ok())

@@ -1,6 +1,10 @@
 //! Micro-benchmarks of the engine's hot loops: `cargo bench --bench engine`.
 //! Figures are recorded in BENCHMARKS.md.
 
+/// The product's allocator (glibc's would add page faults the product does not have).
+#[path = "../../src/allocator.rs"]
+mod allocator;
+
 use std::sync::atomic::AtomicBool;
 
 use divan::{Bencher, black_box, counter::ItemsCount};
@@ -16,6 +20,7 @@ use prismap_engine::scene::{SpectralScene, load_builtin};
 use prismap_engine::spectral::{BinGrid, Role, Spectrum, spd};
 
 fn main() {
+    allocator::keep_freed_memory();
     divan::main();
 }
 

@@ -6,6 +6,10 @@
 //!
 //! `PRISMAP_BENCH_REFERENCE_PASSES` (default 96) sets the reference's length.
 
+/// The product's allocator (glibc's would add page faults the product does not have).
+#[path = "../../src/allocator.rs"]
+mod allocator;
+
 use std::path::PathBuf;
 
 use prismap_engine::render::session::next_radius_sq_factor;
@@ -15,6 +19,7 @@ use prismap_engine::render::{
 use prismap_engine::scene;
 
 fn main() {
+    allocator::keep_freed_memory();
     let path =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenes/blender/spotlit-prism.glb");
     let s = scene::load(&path).expect("the fixture loads");

@@ -28,6 +28,10 @@
 //! dispersion split). The references take the default
 //! caustic factor.
 
+/// The product's allocator (glibc's would add page faults the product does not have).
+#[path = "../../src/allocator.rs"]
+mod allocator;
+
 use prismap_engine::metrics::psnr;
 use prismap_engine::photon::Storage;
 use prismap_engine::render::{Flow, Image, RenderSession, RenderSettings, Stop};
@@ -323,6 +327,7 @@ fn print_table(title: &str, targets: &[f64], rows: &[(String, Outcome)]) {
 }
 
 fn main() {
+    allocator::keep_freed_memory();
     let reference_passes: u64 = env_or("PRISMAP_BENCH_REFERENCE_PASSES", 256);
     let max_seconds: f64 = env_or("PRISMAP_BENCH_MAX_SECONDS", 40.0);
     let only = std::env::var("PRISMAP_BENCH_SCENE").ok();
