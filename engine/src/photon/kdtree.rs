@@ -51,14 +51,31 @@ pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
     // they already hold instead of chasing an index per comparison; coordinates as
     // `order_key`s, so that a comparison (coordinate, then index: ties split by count) is
     // one 64-bit integer comparison.
+    // Keys, bounds and the permutation on every thread (serial, they left the other core
+    // idle around the build's parallel halves).
+    use rayon::prelude::*;
     let mut items: Vec<([u32; 3], u32)> = positions
-        .iter()
+        .par_iter()
         .enumerate()
-        .map(|(i, p)| (p.map(order_key), i as u32))
+        .map(|(i, p)| {
+            (
+                [order_key(p[0]), order_key(p[1]), order_key(p[2])],
+                i as u32,
+            )
+        })
         .collect();
     let mut axes = vec![0u8; positions.len()];
-    build(&mut items, &mut axes, bounds_of(positions));
-    (items.iter().map(|it| it.1).collect(), axes)
+    let bounds = positions.par_chunks(PARALLEL_CUTOFF).map(bounds_of).reduce(
+        || ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]),
+        |(lo_a, hi_a), (lo_b, hi_b)| {
+            (
+                std::array::from_fn(|a| lo_a[a].min(lo_b[a])),
+                std::array::from_fn(|a| hi_a[a].max(hi_b[a])),
+            )
+        },
+    );
+    build(&mut items, &mut axes, bounds);
+    (items.par_iter().map(|it| it.1).collect(), axes)
 }
 
 /// The smallest box holding `positions` (lowest and highest corner).

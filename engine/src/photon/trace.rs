@@ -250,24 +250,25 @@ pub fn trace_photons(
     if over.load(Ordering::Relaxed) {
         return Err(TraceStop::OverBudget);
     }
-    let mut global = PhotonBatch::new(settings.record, &scene.grid);
-    let mut caustics = PhotonBatch::new(settings.record, &scene.grid);
-    // One allocation each (growing by doubling faulted in fresh pages every pass).
     let count = |pick: fn(&ChunkResult) -> usize| results.iter().flatten().map(pick).sum::<usize>();
-    global.reserve(count(|r| r.0.len()));
-    caustics.reserve(count(|r| r.1.len()));
     let mut reports = Vec::with_capacity(count(|r| r.3.len()));
     let mut splits = 0;
+    let (mut globals, mut caustic_batches) = (Vec::new(), Vec::new());
     for r in results {
         let (g, c, s, rep) = r.ok_or(TraceStop::Cancelled)?;
-        global.append(g);
-        caustics.append(c);
+        globals.push(g);
+        caustic_batches.push(c);
         splits += s;
         reports.extend_from_slice(&rep);
     }
     if cancel.load(Ordering::Relaxed) {
         return Err(TraceStop::Cancelled);
     }
+    // The chunks in order, each map in one allocation, copied on every thread.
+    let (global, caustics) = rayon::join(
+        || PhotonBatch::concat(settings.record, &scene.grid, globals),
+        || PhotonBatch::concat(settings.record, &scene.grid, caustic_batches),
+    );
     let (global, caustic_map) = rayon::join(
         || PhotonMap::build(global),
         || caustic.then(|| PhotonMap::build(caustics)),
