@@ -508,8 +508,20 @@ impl PhotonMap {
         }
     }
 
+    /// Builds now the occupancy grid that the first density estimate with a search cap of
+    /// `r_max` would otherwise build, on one thread, while the map's other estimates
+    /// waited for it. The pass's kernels are known before its gather (see
+    /// `RenderSession::prepare`, which runs beside the previous pass's gather from the
+    /// second pass on). A grid already built stays.
+    pub fn prepare_search(&self, r_max: f32) {
+        if r_max > 0.0 && r_max.is_finite() {
+            self.occupancy
+                .get_or_init(|| Occupancy::build(&self.positions, r_max));
+        }
+    }
+
     /// Whether a photon may lie within `r` of `p` (false only when none does), by the
-    /// occupancy grid built for `r_max` on first use.
+    /// occupancy grid built for `r_max` on first use (or by [`Self::prepare_search`]).
     fn may_hold_within(&self, p: Vec3, r: f32, r_max: f32) -> bool {
         if !(r_max > 0.0 && r_max.is_finite()) {
             return true;

@@ -636,6 +636,17 @@ impl RenderSession {
         start: Instant,
     ) -> Prepared {
         let (r1, kernels, typical) = self.kernels(&maps, r1, radius_sq_factor);
+        // Each map's occupancy grid for the cap its estimates search to, the two side by
+        // side, now: built at a map's first estimate, one thread built it while the
+        // gather's others waited.
+        rayon::join(
+            || maps.global.prepare_search(kernels.0.r_max),
+            || {
+                if let Some(c) = &maps.caustic {
+                    c.prepare_search(kernels.1.r_max);
+                }
+            },
+        );
         // Final-gather rays read precomputed irradiance (one density estimate per
         // `precompute_every` photons instead of one per ray).
         let irradiance = (self.settings.final_gather_rays > 0).then(|| {
