@@ -50,9 +50,9 @@ pub fn build_order(positions: &[[f32; 3]]) -> (Vec<u32>, Vec<u8>) {
     // Points travel with their index (16 bytes each), so the selections compare memory
     // they already hold instead of chasing an index per comparison; coordinates as
     // `order_key`s, so that a comparison (coordinate, then index: ties split by count) is
-    // one 64-bit integer comparison.
-    // Keys, bounds and the permutation on every thread (serial, they left the other core
-    // idle around the build's parallel halves).
+    // one 64-bit integer comparison. The keys, the bounds and the permutation are computed
+    // on every thread (serial, they left the other core idle around the build's parallel
+    // halves).
     use rayon::prelude::*;
     let mut items: Vec<([u32; 3], u32)> = positions
         .par_iter()
