@@ -296,6 +296,12 @@ fn concat_par<T: Copy + Send + Sync>(parts: Vec<&[T]>) -> Vec<T> {
     out
 }
 
+/// `pick(i)` for every index `i` of `order`, in that order, computed on every thread.
+fn in_order<T: Send>(order: &[u32], pick: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    use rayon::prelude::*;
+    order.par_iter().map(|&i| pick(i as usize)).collect()
+}
+
 /// Smallest cosine between a photon's stored normal and a query's normal for the photon to
 /// count (37°): adjacent facets of a tessellated curved surface pass, a perpendicular or
 /// opposite face does not.
@@ -461,28 +467,19 @@ impl PhotonMap {
         debug_assert!(keeps_incoming || batch.incoming.is_empty());
         // Each array gathered into kd order on every thread (a serial copy of them all was
         // a fifth of a small scene's photon pass on one core).
-        let gather = |pick: &(dyn Fn(usize) -> u32 + Sync)| -> Vec<u32> {
-            order.par_iter().map(|&i| pick(i as usize)).collect()
-        };
-        let positions: Vec<[f32; 3]> = order.par_iter().map(|&i| raw_pos[i as usize]).collect();
-        let incoming: Vec<u16> = if keeps_incoming {
-            order
-                .par_iter()
-                .map(|&i| batch.incoming[i as usize])
-                .collect()
+        let positions = in_order(&order, |i| raw_pos[i]);
+        let incoming = if keeps_incoming {
+            in_order(&order, |i| batch.incoming[i])
         } else {
             Vec::new()
         };
         let (mut normals, mut normals16, mut flux, mut packed) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         if packed_records {
-            normals16 = order
-                .par_iter()
-                .map(|&i| oct_to_16(batch.headers[i as usize].normal))
-                .collect();
-            packed = gather(&|i| batch.packed[i]);
+            normals16 = in_order(&order, |i| oct_to_16(batch.headers[i].normal));
+            packed = in_order(&order, |i| batch.packed[i]);
         } else {
-            normals = gather(&|i| batch.headers[i].normal);
+            normals = in_order(&order, |i| batch.headers[i].normal);
             flux = vec![0.0f32; batch.flux.len()];
             if stride > 0 {
                 flux.par_chunks_mut(stride)
