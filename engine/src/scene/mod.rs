@@ -6,6 +6,7 @@
 //! temperature, built-in illuminant, or measured SPD file) on a material or a light,
 //! scaled to the luminance of the glTF emissive colour or light colour × intensity.
 
+mod coverage;
 mod gltf_load;
 mod spectral;
 pub mod texture;
