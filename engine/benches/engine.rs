@@ -11,7 +11,7 @@ use divan::{Bencher, black_box, counter::ItemsCount};
 use glam::Vec3;
 use prismap_engine::photon::record::oct_decode;
 use prismap_engine::photon::{
-    IrradianceCache, Kernel, PhotonMap, PhotonSettings, Storage, trace_photons,
+    IrradianceCache, Kernel, PhotonMap, PhotonSettings, Reading, Storage, trace_photons,
 };
 use prismap_engine::render::RenderSettings;
 use prismap_engine::render::session::{PRECOMPUTE_EVERY, next_radius_sq_factor};
@@ -206,18 +206,22 @@ fn irradiance_lookups(bencher: Bencher, storage: Storage) {
     let cache = IrradianceCache::build(
         &map,
         &scene.grid,
+        Some(&scene),
         kernel,
         PRECOMPUTE_EVERY,
         r_min,
         kernel.r_max,
-    );
+        &AtomicBool::new(false),
+    )
+    .unwrap();
     let mut out = vec![0.0f32; 20];
     bencher
         .counter(ItemsCount::new(points.len()))
         .bench_local(|| {
             let mut hits = 0;
             for &(p, normal) in &points {
-                hits += usize::from(cache.lookup(&scene.grid, p, normal, &mut out));
+                hits +=
+                    usize::from(cache.lookup(&scene.grid, p, normal, &mut out) == Reading::Value);
             }
             hits
         });

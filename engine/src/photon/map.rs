@@ -706,46 +706,26 @@ impl PhotonMap {
         found: &mut Vec<(f32, u32)>,
         out: &mut [f32],
     ) -> Estimate {
-        self.estimate_skipping(grid, p, n, kernel, None, found, out)
+        self.estimate_among(grid, p, n, kernel, |_| true, found, out)
     }
 
-    /// [`Self::estimate`] at stored photon `i`'s own position and normal, from the other
-    /// photons. Photon `i` lies at distance 0, inside every radius: counted, it would add
-    /// its own flux over π r² to a sum that holds (k − 1)·shrink² photons on average, a
-    /// bias of 1 / ((k − 1)·shrink²) that grows as the radius shrinks over passes, and
-    /// far more where the search stops at its cap with only a few photons (the irradiance
-    /// cache's estimates in dim corners read several times their light). Without it the
-    /// estimate is a random query's: the other photons of a Poisson process, seen from
-    /// one of its points, are again that Poisson process (Slivnyak's theorem).
-    pub fn estimate_at_photon(
-        &self,
-        grid: &BinGrid,
-        i: usize,
-        kernel: Kernel,
-        found: &mut Vec<(f32, u32)>,
-        out: &mut [f32],
-    ) -> Estimate {
-        let p = Vec3::from_array(self.positions[i]);
-        let n = super::record::oct_decode(self.normal_code(i));
-        self.estimate_skipping(grid, p, n, kernel, Some(i), found, out)
-    }
-
-    /// [`Self::estimate`] without photon `skip`.
+    /// [`Self::estimate`] from the photons `keep` accepts only (by index): the irradiance
+    /// cache's estimates count only the half of the photons that does not place its
+    /// points (see `irradiance::one_per_cell`).
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn estimate_skipping(
+    pub fn estimate_among(
         &self,
         grid: &BinGrid,
         p: Vec3,
         n: Vec3,
         kernel: Kernel,
-        skip: Option<usize>,
+        keep: impl Fn(usize) -> bool + Copy,
         found: &mut Vec<(f32, u32)>,
         out: &mut [f32],
     ) -> Estimate {
         let test = self.surface_test(p, n);
-        let skip = skip.unwrap_or(usize::MAX);
-        let accept = |i: usize| i != skip && test.accepts(i);
+        let accept = |i: usize| keep(i) && test.accepts(i);
         if kernel.k == 0 {
             let r = kernel.r_max * kernel.shrink;
             found.clear();
@@ -793,7 +773,7 @@ impl PhotonMap {
             }
         });
         let r = if found.len() < kernel.k && r < kernel.r_max {
-            self.regrow_search(p, n, r, kernel, skip, found)
+            self.regrow_search(p, n, r, kernel, keep, found)
         } else {
             r
         };
@@ -825,7 +805,7 @@ impl PhotonMap {
     /// radius, `found` holding every accepted photon within it. Kept out of line: most of
     /// the renderer's queries never come here (their start is a neighbour's radius), and
     /// inlined into the estimate it slowed their single search (measured, session 21).
-    /// Photon `skip` is left out (`usize::MAX`: none).
+    /// Only photons `keep` accepts count.
     #[inline(never)]
     fn regrow_search(
         &self,
@@ -833,7 +813,7 @@ impl PhotonMap {
         n: Vec3,
         mut r: f32,
         kernel: Kernel,
-        skip: usize,
+        keep: impl Fn(usize) -> bool,
         found: &mut Vec<(f32, u32)>,
     ) -> f32 {
         let test = self.surface_test(p, n);
@@ -844,7 +824,7 @@ impl PhotonMap {
             r = (r * grow).min(kernel.r_max);
             found.clear();
             kdtree::for_each_within(&self.positions, &self.axes, p, r * r, |i, d2| {
-                if i != skip && test.accepts(i) {
+                if keep(i) && test.accepts(i) {
                     found.push((d2, i as u32));
                 }
             });

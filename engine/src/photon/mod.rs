@@ -10,7 +10,7 @@ pub mod record;
 pub mod trace;
 pub mod visibility;
 
-pub use irradiance::IrradianceCache;
+pub use irradiance::{IrradianceCache, Reading};
 pub use map::{Estimate, Kernel, PhotonBatch, PhotonMap};
 pub use record::{Record, Storage};
 pub use trace::{PhotonPass, PhotonSettings, TraceStop, split_dispersive, trace_photons};

@@ -879,6 +879,14 @@ impl Gather<'_> {
                     let e: &[f32] = match self.irradiance {
                         Some(c) => match c.nearest(p, nf) {
                             None => return,
+                            // Beyond the nearest point's reach (next to a bright
+                            // patch, see `Reading::Outside`): an estimate of its own.
+                            Some(i) if !c.covers(i, p) => {
+                                let mut hint = c.hint(i, p);
+                                let kernel = self.global_kernel;
+                                self.density(self.global, p, nf, kernel, &mut hint, found, out);
+                                out
+                            }
                             Some(i) => match c.value(i) {
                                 Some(v) => v,
                                 None => {

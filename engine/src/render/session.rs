@@ -613,14 +613,16 @@ impl RenderSession {
             &self.cancel,
         );
         let note = self.budget_note(photons);
-        Some(self.prepare(
+        let prepared = self.prepare(
             maps.ok()?,
             photons,
             note,
             current.r1,
             radius_sq_factor,
             start,
-        ))
+        );
+        // Cancelled while preparing: its cache may be missing.
+        (!self.cancel.load(Ordering::Relaxed)).then_some(prepared)
     }
 
     /// What a pass derives from its photon maps before gathering: the first-pass radii
@@ -649,16 +651,20 @@ impl RenderSession {
         );
         // Final-gather rays read precomputed irradiance (one density estimate per
         // `precompute_every` photons instead of one per ray).
+        // None also when cancelled: the pass then stops at its first row.
         let irradiance = (self.settings.final_gather_rays > 0).then(|| {
             IrradianceCache::build(
                 &maps.global,
                 &self.scene.grid,
+                Some(&*self.scene),
                 kernels.0,
                 precompute_every(kernels.0.shrink),
                 self.r_min(),
                 kernels.0.r_max,
+                &self.cancel,
             )
         });
+        let irradiance = irradiance.flatten();
         Prepared {
             maps,
             photons,
