@@ -497,11 +497,13 @@ impl IrradianceCache {
         self.positions.is_empty()
     }
 
-    /// Bytes of the points, their normals and values, the kd axis bytes and the cell map.
+    /// Bytes of the points, their normals, values, reaches and hints, the kd axis bytes
+    /// and the cell map.
     pub fn memory_bytes(&self) -> usize {
         self.positions.len() * 12
             + self.normals.len() * 4
             + self.values.len() * 4
+            + (self.reach2.len() + self.hints.len()) * 4
             + self.axes.len()
             + self.guides.len() * 4
             + (self.cells.capacity() + self.guide_cells.capacity())
@@ -605,6 +607,25 @@ mod tests {
         })
     }
 
+    /// The cache of `map` the tests read (no scene: estimates divide by π r²).
+    fn cache_of(
+        map: &PhotonMap,
+        grid: &BinGrid,
+        kernel: Kernel,
+        every: usize,
+        r_lookup: f32,
+    ) -> IrradianceCache {
+        let cancel = AtomicBool::new(false);
+        IrradianceCache::build(map, grid, None, kernel, every, 1e-6, r_lookup, &cancel).unwrap()
+    }
+
+    /// A density estimate of irradiance at `p` (facing +z) into `out`.
+    fn estimate_at(map: &PhotonMap, grid: &BinGrid, kernel: Kernel, p: Vec3, out: &mut [f32]) {
+        out.fill(0.0);
+        let est = map.estimate(grid, p, Vec3::Z, kernel, &mut Vec::new(), out);
+        spd::scale(out, 1.0 / (std::f32::consts::PI * est.r * est.r));
+    }
+
     /// The irradiance the final gather reads at `p` (facing +z) into `out`: the cache's
     /// value, or a density estimate of its own where the cache says [`Reading::Outside`].
     fn read(
@@ -617,11 +638,7 @@ mod tests {
     ) {
         match cache.lookup(grid, p, Vec3::Z, out) {
             Reading::Value => {}
-            Reading::Outside => {
-                out.fill(0.0);
-                let est = map.estimate(grid, p, Vec3::Z, kernel, &mut Vec::new(), out);
-                spd::scale(out, 1.0 / (std::f32::consts::PI * est.r * est.r));
-            }
+            Reading::Outside => estimate_at(map, grid, kernel, p, out),
             Reading::Nothing => panic!("no point near {p}"),
         }
     }
@@ -639,17 +656,7 @@ mod tests {
         let grid = BinGrid::with_bins(4).unwrap();
         for record in [Record::Full, Record::Compact] {
             let map = uniform_unit_square(&grid, record, 2);
-            let cache = IrradianceCache::build(
-                &map,
-                &grid,
-                None,
-                SQUARE_KERNEL,
-                4,
-                1e-6,
-                0.1,
-                &AtomicBool::new(false),
-            )
-            .unwrap();
+            let cache = cache_of(&map, &grid, SQUARE_KERNEL, 4, 0.1);
             // Cells of 0.0075 (17 778 on the square), 20 000 placing photons: about
             // 1 − e^(−1.125) = 68 % of the cells hold a point.
             assert!((11_000..=13_000).contains(&cache.len()), "{}", cache.len());
@@ -686,17 +693,7 @@ mod tests {
         let mut all = 0.0;
         for seed in 1..=12u64 {
             let map = uniform_unit_square(&grid, Record::Full, seed);
-            let cache = IrradianceCache::build(
-                &map,
-                &grid,
-                None,
-                SQUARE_KERNEL,
-                4,
-                1e-6,
-                0.1,
-                &AtomicBool::new(false),
-            )
-            .unwrap();
+            let cache = cache_of(&map, &grid, SQUARE_KERNEL, 4, 0.1);
             let mut sum = 0.0;
             for p in middle_of_the_square() {
                 read(&cache, &map, &grid, SQUARE_KERNEL, p, &mut out);
@@ -739,17 +736,7 @@ mod tests {
         };
         let build = |crowd| {
             let map = square_with_a_crowd(&grid, crowd);
-            IrradianceCache::build(
-                &map,
-                &grid,
-                None,
-                kernel,
-                4,
-                1e-6,
-                0.1,
-                &AtomicBool::new(false),
-            )
-            .unwrap()
+            cache_of(&map, &grid, kernel, 4, 0.1)
         };
         let (without, cache) = (build(false), build(true));
         // Cells of 0.0075: the crowd spans at most 4 × 4 of them.
@@ -790,23 +777,8 @@ mod tests {
             r_start: map.typical_knn_radius(32, 256).unwrap(),
             shrink: 1.0,
         };
-        let cache = IrradianceCache::build(
-            &map,
-            &grid,
-            None,
-            kernel,
-            every,
-            1e-6,
-            0.2,
-            &AtomicBool::new(false),
-        )
-        .unwrap();
-        let (mut found, mut out) = (Vec::new(), vec![0.0; 4]);
-        let mut estimate = |p: Vec3, out: &mut [f32]| {
-            out.fill(0.0);
-            let est = map.estimate(&grid, p, Vec3::Z, kernel, &mut found, out);
-            out[0] / (std::f32::consts::PI * est.r * est.r)
-        };
+        let cache = cache_of(&map, &grid, kernel, every, 0.2);
+        let mut out = vec![0.0; 4];
         let (n, mut cached, mut direct) = (200, 0.0, 0.0);
         for i in 0..n * n {
             let p = Vec3::new(
@@ -814,12 +786,10 @@ mod tests {
                 0.25 + 0.5 * ((i / n) as f32 + 0.5) / n as f32,
                 0.0,
             );
-            cached += match cache.lookup(&grid, p, Vec3::Z, &mut out) {
-                Reading::Value => out[0],
-                Reading::Outside => estimate(p, &mut out),
-                Reading::Nothing => panic!("no point near {p}"),
-            };
-            direct += estimate(p, &mut out);
+            read(&cache, &map, &grid, kernel, p, &mut out);
+            cached += out[0];
+            estimate_at(&map, &grid, kernel, p, &mut out);
+            direct += out[0];
         }
         let exact = (n * n) as f32 * 0.5 * (e_dark + e_bright);
         (cached / exact, direct / exact)
